@@ -1,0 +1,82 @@
+"""The tatl-mj task suite, loaded like dm_control's.
+
+>>> from tatl_mj import suite
+>>> env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+>>> timestep = env.reset()
+
+Every task speaks dm_env. Physics tasks are ``dm_control.rl.control.Environment``
+instances whose observation is ``{"state": the paper's state vector}``.
+"""
+
+from __future__ import annotations
+
+import inspect
+from types import ModuleType
+from typing import Any
+
+import dm_env
+import numpy as np
+
+from tatl_mj.suite import cartpole, gridworld, mountain_car, pendulum
+
+DOMAINS: dict[str, ModuleType] = {
+    "cartpole": cartpole,
+    "pendulum": pendulum,
+    "mountain_car": mountain_car,
+    "gridworld": gridworld,
+}
+
+ALL_TASKS: tuple[tuple[str, str], ...] = tuple(
+    (domain, task) for domain, module in DOMAINS.items() for task in module.TASKS
+)
+
+
+def _domain(name: str) -> ModuleType:
+    if name not in DOMAINS:
+        raise ValueError(f"unknown domain {name!r}; valid domains: {sorted(DOMAINS)}")
+    return DOMAINS[name]
+
+
+def load(
+    domain: str,
+    task: str,
+    task_kwargs: dict[str, Any] | None = None,
+    environment_kwargs: dict[str, Any] | None = None,
+) -> dm_env.Environment:
+    """Returns the environment for ``domain/task``.
+
+    ``task_kwargs`` go to the task's factory (``random`` seeds the episode,
+    ``time_limit`` in seconds, and the task's own options); ``environment_kwargs``
+    go to the dm_control ``Environment`` (e.g. ``flat_observation``).
+    Unknown names raise ``ValueError`` listing the valid ones.
+    """
+    module = _domain(domain)
+    if task not in module.TASKS:
+        raise ValueError(
+            f"unknown task {task!r} for domain {domain!r}; valid tasks: {sorted(module.TASKS)}"
+        )
+    factory = module.TASKS[task]
+    kwargs = dict(task_kwargs or {})
+    accepted = [
+        name for name, p in inspect.signature(factory).parameters.items()
+        if name != "environment_kwargs" and p.kind is not p.VAR_KEYWORD
+    ]
+    unknown = sorted(set(kwargs) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}"
+        )
+    return factory(environment_kwargs=environment_kwargs, **kwargs)
+
+
+def action_set(domain: str) -> np.ndarray:
+    """The paper's discrete action set of a domain; ``env.step(action_set(d)[i])`` is valid."""
+    return _domain(domain).ACTIONS
+
+
+def discrete_action(domain: str, index: int) -> np.ndarray:
+    """The actuator value of discrete action ``index`` (e.g. 0 -> -20 N for cart-pole)."""
+    actions = action_set(domain)
+    if not 0 <= int(index) < len(actions):
+        raise ValueError(f"action index {index} out of range for {domain}; valid: 0..{len(actions) - 1}")
+    return actions[int(index)]

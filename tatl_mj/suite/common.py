@@ -1,0 +1,137 @@
+"""What every tatl-mj domain shares: model files, parameter checks, the environment.
+
+A physics domain is a module beside this one with
+- a ``Physics`` subclass of :class:`StatePhysics` (named getters, ``state_vector``),
+- a ``Task`` (usually a :class:`StateTask`),
+- ``ACTIONS``: the paper's discrete action set; ``env.step(ACTIONS[i])`` is valid,
+- ``TASKS``: ``{task_name: factory}``; a factory takes ``time_limit``, ``random``,
+  ``environment_kwargs`` and the task's own keyword arguments.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+import dm_env
+import numpy as np
+from dm_control.rl import control
+from dm_control.suite import base
+from dm_control.mujoco import engine
+
+MJCF_DIR = Path(__file__).resolve().parents[2] / "assets" / "mjcf"
+_COMMON_INCLUDES = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
+
+
+def read_model(filename: str) -> tuple[str, dict[str, bytes]]:
+    """Returns an MJCF file's text and the shared include files it may use."""
+    path = MJCF_DIR / filename
+    if not path.is_file():
+        raise FileNotFoundError(f"MJCF model {filename!r} not found in {MJCF_DIR}")
+    assets = {name: (MJCF_DIR / name).read_bytes() for name in _COMMON_INCLUDES}
+    return path.read_text(), assets
+
+
+# --- Physical parameters ------------------------------------------------------
+
+def positive(default: float, doc: str = "") -> Any:
+    """A dataclass field that must be a finite number > 0."""
+    return dataclasses.field(default=default, metadata={"bound": "positive", "doc": doc})
+
+
+def nonnegative(default: float, doc: str = "") -> Any:
+    """A dataclass field that must be a finite number >= 0."""
+    return dataclasses.field(default=default, metadata={"bound": "nonnegative", "doc": doc})
+
+
+def check_params(params: Any) -> None:
+    """Raises ValueError naming the first field that is not physical.
+
+    Every float field must be finite; fields made with :func:`positive` or
+    :func:`nonnegative` must also respect their bound. Call it from
+    ``__post_init__`` of a frozen parameter dataclass.
+    """
+    cls = type(params).__name__
+    for field in dataclasses.fields(params):
+        value = getattr(params, field.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        if not math.isfinite(value):
+            raise ValueError(f"{cls}.{field.name} must be a finite number, got {value!r}")
+        bound = field.metadata.get("bound")
+        if bound == "positive" and value <= 0:
+            raise ValueError(f"{cls}.{field.name} must be > 0, got {value!r}")
+        if bound == "nonnegative" and value < 0:
+            raise ValueError(f"{cls}.{field.name} must be >= 0, got {value!r}")
+
+
+# --- Physics and task ---------------------------------------------------------
+
+class StatePhysics(engine.Physics):
+    """A Physics that speaks the paper's state vector.
+
+    ``state_vector()`` returns the paper's state (float64, domain order) and
+    ``set_state_vector(s)`` puts the simulator in that state, so that a transfer
+    method can ask what the system does from a given state (Algorithm 1).
+    """
+
+    def state_vector(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def set_state_vector(self, state: np.ndarray) -> None:
+        raise NotImplementedError
+
+
+def as_state(state: Any, size: int, domain: str) -> np.ndarray:
+    """Checks a state vector's shape and finiteness; returns it as float64."""
+    s = np.asarray(state, dtype=np.float64)
+    if s.shape != (size,):
+        raise ValueError(f"{domain} state must have shape ({size},), got {s.shape}")
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"{domain} state must be finite, got {s}")
+    return s
+
+
+class StateTask(base.Task):
+    """A task whose observation is the paper's state: ``{"state": float64 array}``."""
+
+    def get_observation(self, physics: StatePhysics) -> collections.OrderedDict:
+        return collections.OrderedDict(state=physics.state_vector())
+
+
+class Environment(control.Environment):
+    """dm_control's Environment, except that a diverging simulation ends the episode.
+
+    When MuJoCo raises a warning (e.g. ``mjWARN_BADQACC``) during a step, the
+    episode ends with ``discount=0``, reward 0 and the last finite observation;
+    ``diverged`` then holds MuJoCo's message, so the failure is never silent and
+    never returns NaN. The next ``step`` starts a new episode, as after any end.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.diverged: str | None = None
+        self._last_observation: Any = None
+        self._must_reset = False
+
+    def reset(self) -> dm_env.TimeStep:
+        self.diverged = None
+        self._must_reset = False
+        timestep = super().reset()
+        self._last_observation = timestep.observation
+        return timestep
+
+    def step(self, action: Any) -> dm_env.TimeStep:
+        if self._must_reset:
+            return self.reset()
+        try:
+            timestep = super().step(action)
+        except control.PhysicsError as error:
+            self.diverged = str(error)
+            self._must_reset = True
+            return dm_env.termination(reward=0.0, observation=self._last_observation)
+        self._last_observation = timestep.observation
+        return timestep
