@@ -17,12 +17,13 @@ from typing import Any
 import dm_env
 import numpy as np
 
-from tatl_mj.suite import cartpole, gridworld, mountain_car, pendulum
+from tatl_mj.suite import bicycle, cartpole, gridworld, mountain_car, pendulum
 
 DOMAINS: dict[str, ModuleType] = {
     "cartpole": cartpole,
     "pendulum": pendulum,
     "mountain_car": mountain_car,
+    "bicycle": bicycle,
     "gridworld": gridworld,
 }
 

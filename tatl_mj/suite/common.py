@@ -76,13 +76,31 @@ class StatePhysics(engine.Physics):
     ``state_vector()`` returns the paper's state (float64, domain order) and
     ``set_state_vector(s)`` puts the simulator in that state, so that a transfer
     method can ask what the system does from a given state (Algorithm 1).
+
+    Both go through the vectorised pair ``states_from`` / ``qpos_qvel_from``, which
+    the fast sampler (``tatl_mj.sampling``) applies to whole ``mujoco.rollout``
+    batches: one formula serves the environment and the sampler.
     """
 
-    def state_vector(self) -> np.ndarray:
+    STATE_SIZE: int = 0
+
+    def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        """(N, nq), (N, nv) -> (N, STATE_SIZE) paper states."""
         raise NotImplementedError
 
-    def set_state_vector(self, state: np.ndarray) -> None:
+    def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, STATE_SIZE) paper states -> (N, nq), (N, nv). Inverse of ``states_from``."""
         raise NotImplementedError
+
+    def state_vector(self) -> np.ndarray:
+        return self.states_from(self.data.qpos[None], self.data.qvel[None])[0]
+
+    def set_state_vector(self, state: np.ndarray) -> None:
+        s = as_state(state, self.STATE_SIZE, type(self).__module__)
+        qpos, qvel = self.qpos_qvel_from(s[None])
+        with self.reset_context():
+            self.data.qpos[:] = qpos[0]
+            self.data.qvel[:] = qvel[0]
 
 
 def as_state(state: Any, size: int, domain: str) -> np.ndarray:
@@ -96,10 +114,44 @@ def as_state(state: Any, size: int, domain: str) -> np.ndarray:
 
 
 class StateTask(base.Task):
-    """A task whose observation is the paper's state: ``{"state": float64 array}``."""
+    """A task whose observation is the paper's state: ``{"state": float64 array}``.
+
+    Reward, termination and the mapping from an action to the full control
+    vector are vectorised hooks, so that ``tatl_mj.sampling`` reproduces the
+    task exactly over ``mujoco.rollout`` batches:
+
+    - ``batch_reward(states) -> (N,)``: reward after a step that ends in ``states``;
+    - ``batch_absorbing(states) -> (N,) bool``: the episode ends with discount 0
+      (a failure or the goal);
+    - ``controls(action_values, random) -> (N, nu)``: the full ``ctrl`` vector for
+      actions ``(N, action_dim)`` (adds e.g. servo set-points or rider noise);
+    - ``rollout_compatible``: False when the model itself changes during an
+      episode (the time-varying pendulum), so the sampler must step the env.
+    """
+
+    rollout_compatible: bool = True
 
     def get_observation(self, physics: StatePhysics) -> collections.OrderedDict:
         return collections.OrderedDict(state=physics.state_vector())
+
+    def batch_reward(self, states: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
+        return np.zeros(len(states), dtype=bool)
+
+    def controls(self, action_values: np.ndarray, random: np.random.RandomState) -> np.ndarray:
+        return np.asarray(action_values, dtype=np.float64)
+
+    def before_step(self, action: Any, physics: StatePhysics) -> None:
+        action = np.asarray(action, dtype=np.float64).reshape(1, -1)
+        physics.set_control(self.controls(action, self.random)[0])
+
+    def get_reward(self, physics: StatePhysics) -> float:
+        return float(self.batch_reward(physics.state_vector()[None])[0])
+
+    def get_termination(self, physics: StatePhysics) -> float | None:
+        return 0.0 if self.batch_absorbing(physics.state_vector()[None])[0] else None
 
 
 class Environment(control.Environment):
