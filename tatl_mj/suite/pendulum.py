@@ -1,6 +1,257 @@
-"""Placeholder until the pendulum domain lands (being written now)."""
+"""Pendulum swing-up: an under-powered torque swings a point-like mass up and holds it.
 
+The paper's inverted pendulum (IP) in three variants: the plain task, the
+non-stationary target whose length and mass change every step, and the
+negative-transfer target whose control acts with the opposite sign.
+
+=================  ==========================================================
+State              ``[theta, theta_dot]`` (float64)
+                   theta: angle from upright (rad), wrapped to [-pi, pi),
+                   positive when the rod leans towards +x;
+                   theta_dot: angular velocity (rad/s), not limited.
+Actions            ``ACTIONS = [[-2], [0], [2]]``: torque at the hinge (N m,
+                   positive drives theta up). Any torque in +-``max_torque``
+                   is accepted; larger values are clipped by MuJoCo.
+                   ``swingup_flipped``: the same numbers act with the
+                   opposite sign (actuator gear -1).
+Reward             ``r = -10 theta^2 - 5 theta_dot^2`` after each step (the
+                   paper's), 0 at best, about -99 hanging at rest.
+Start state        hanging down: theta = pi + U(-0.05, 0.05),
+                   theta_dot = U(-0.05, 0.05), from the task's ``random``.
+Episode end        never absorbing; time limit (default 10 s = 200 steps).
+Timing             control step 0.05 s; physics step 0.01 s (RK4).
+Parameters         :class:`PendulumParams`: mass 1 kg, length 1 m, max_torque
+                   2 N m (the full torque cannot hold the pendulum out
+                   beyond 11.8 degrees from hanging, m g L = 9.81 N m),
+                   gravity 9.81 m/s^2. The tip is a solid sphere of radius
+                   0.05 m (inertia 2/5 m r^2 about its centre); the rod is
+                   massless.
+Time-varying       ``swingup_timevarying``: during control step i (i = 0 at
+                   reset) L_i = L0 + 0.5 cos(pi i / 50) and
+                   M_i = M0 + 0.5 cos(pi i / 50), L0 = length, M0 = mass
+                   (1 and 1: the paper's). The model is edited in place
+                   before each step; the state carries over unchanged.
+=================  ==========================================================
+
+Equation: ``(m L^2 + I) theta_dd = m g L sin(theta) + gear * u``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import mujoco
 import numpy as np
 
-ACTIONS = np.zeros((0, 1))
-TASKS: dict = {}
+from tatl_mj.suite import common
+
+CONTROL_TIMESTEP = 0.05  # s
+DEFAULT_TIME_LIMIT = 10.0  # s, 200 control steps
+TIP_RADIUS = 0.05  # m; fixed, so the tip inertia is 2/5 m r^2 for every mass
+START_HALF_WIDTH = 0.05  # rad and rad/s around hanging at rest
+SCHEDULE_AMPLITUDE = 0.5  # m and kg
+SCHEDULE_PERIOD_STEPS = 100  # cos(pi i / 50) repeats every 100 control steps
+
+ACTIONS = np.array([[-2.0], [0.0], [2.0]])
+
+
+@dataclasses.dataclass(frozen=True)
+class PendulumParams:
+    """Physical parameters of the pendulum; non-physical values raise ValueError."""
+
+    mass: float = common.positive(1.0, "tip mass (kg)")
+    length: float = common.positive(1.0, "hinge to tip centre (m)")
+    max_torque: float = common.positive(2.0, "largest torque the actuator applies (N m)")
+    gravity: float = common.positive(9.81, "gravitational acceleration (m/s^2)")
+
+    def __post_init__(self) -> None:
+        common.check_params(self)
+
+
+def timevarying_schedule(step: int, params: PendulumParams | None = None) -> tuple[float, float]:
+    """(length m, mass kg) during control step ``step`` of ``swingup_timevarying``."""
+    params = params or PendulumParams()
+    wave = SCHEDULE_AMPLITUDE * math.cos(math.pi * step / (SCHEDULE_PERIOD_STEPS / 2))
+    return params.length + wave, params.mass + wave
+
+
+def wrap_angle(theta: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return np.mod(np.asarray(theta, np.float64) + np.pi, 2.0 * np.pi) - np.pi
+
+
+class Physics(common.StatePhysics):
+    """Pendulum physics with the paper's state ``[theta, theta_dot]``."""
+
+    STATE_SIZE = 2
+
+    def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        qpos, qvel = np.asarray(qpos, np.float64), np.asarray(qvel, np.float64)
+        return np.stack([wrap_angle(qpos[:, 0]), qvel[:, 0]], axis=1)
+
+    def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = np.asarray(states, np.float64)
+        return s[:, :1].copy(), s[:, 1:2].copy()
+
+    def angle(self) -> float:
+        """theta (rad) from upright, wrapped to [-pi, pi)."""
+        return float(wrap_angle(self.data.qpos[0]))
+
+    def angular_velocity(self) -> float:
+        """theta_dot (rad/s)."""
+        return float(self.data.qvel[0])
+
+    def torque(self) -> float:
+        """Torque the actuator applies at the hinge now (N m), after clipping and gear."""
+        return float(self.data.qfrc_actuator[0])
+
+    def pendulum_length(self) -> float:
+        """Hinge to tip centre (m)."""
+        return float(self.named.model.body_ipos["pole"][2])
+
+    def pendulum_mass(self) -> float:
+        """Tip mass (kg)."""
+        return float(self.named.model.body_mass["pole"])
+
+    def set_pendulum(self, length: float, mass: float) -> None:
+        """Gives the pendulum a new length (m) and mass (kg) in the compiled model.
+
+        Writes the mass properties and the geometry, then refreshes derived model
+        fields with ``mj_setConst`` on a scratch MjData, so qpos, qvel and the rest
+        of the live state are untouched; no recompiling.
+        """
+        for name, value in (("length", length), ("mass", mass)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"set_pendulum {name} must be a finite number > 0, got {value!r}")
+        length, mass = float(length), float(mass)
+        model = self.named.model
+        tip_inertia = 0.4 * mass * TIP_RADIUS ** 2
+        model.body_mass["pole"] = mass
+        model.body_inertia["pole"] = tip_inertia
+        model.body_ipos["pole"] = (0.0, 0.0, length)
+        rod_radius = model.geom_size["rod"][0]
+        model.geom_size["rod"][1] = length / 2.0  # capsule half-length
+        model.geom_pos["rod"] = (0.0, 0.0, length / 2.0)
+        model.geom_pos["tip"] = (0.0, 0.0, length)
+        # Bounding volumes, so rendering does not cull a lengthened rod.
+        model.geom_rbound["rod"] = length / 2.0 + rod_radius
+        model.geom_aabb["rod"] = (0.0, 0.0, 0.0, rod_radius, rod_radius, length / 2.0 + rod_radius)
+        scratch = getattr(self, "_scratch_data", None)
+        if scratch is None:
+            scratch = mujoco.MjData(self.model.ptr)
+            self._scratch_data = scratch
+        mujoco.mj_setConst(self.model.ptr, scratch)
+
+
+def make_physics(params: PendulumParams | None = None, flipped: bool = False) -> Physics:
+    """A compiled pendulum with ``params`` applied; ``flipped`` reverses the control's sign."""
+    params = as_params(params)
+    physics = Physics.from_xml_string(*common.read_model("pendulum.xml"))
+    model = physics.named.model
+    model.actuator_gear["torque"][0] = -1.0 if flipped else 1.0
+    model.actuator_ctrlrange["torque"] = (-params.max_torque, params.max_torque)
+    physics.model.opt.gravity[:] = (0.0, 0.0, -params.gravity)
+    physics.set_pendulum(params.length, params.mass)  # also runs mj_setConst
+    return physics
+
+
+class Task(common.StateTask):
+    """Swing the pendulum up and hold it: reward ``-10 theta^2 - 5 theta_dot^2``."""
+
+    def __init__(self, params: PendulumParams, timevarying: bool = False, random: Any = None) -> None:
+        super().__init__(random=random)
+        self.params = params
+        self.timevarying = timevarying
+        # The model changes every step, so mujoco.rollout cannot replay it.
+        self.rollout_compatible = not timevarying
+        self.step_index = 0
+
+    def initialize_episode(self, physics: Physics) -> None:
+        self.step_index = 0
+        if self.timevarying:
+            physics.set_pendulum(*timevarying_schedule(0, self.params))
+        theta = np.pi + self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH)
+        theta_dot = self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH)
+        # dm_control already runs this inside physics.reset_context().
+        physics.data.qpos[0] = theta
+        physics.data.qvel[0] = theta_dot
+        super().initialize_episode(physics)
+
+    def before_step(self, action: Any, physics: Physics) -> None:
+        if self.timevarying:
+            physics.set_pendulum(*timevarying_schedule(self.step_index, self.params))
+        self.step_index += 1
+        super().before_step(action, physics)
+
+    def batch_reward(self, states: np.ndarray) -> np.ndarray:
+        s = np.asarray(states, np.float64)
+        return -10.0 * s[:, 0] ** 2 - 5.0 * s[:, 1] ** 2
+
+
+def _environment(
+    physics: Physics, task: Task, time_limit: float, environment_kwargs: dict[str, Any] | None
+) -> common.Environment:
+    return common.Environment(
+        physics, task, time_limit=time_limit, control_timestep=CONTROL_TIMESTEP,
+        **(environment_kwargs or {}),
+    )
+
+
+def swingup(
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    random: Any = None,
+    environment_kwargs: dict[str, Any] | None = None,
+    params: PendulumParams | None = None,
+) -> common.Environment:
+    """The conventional pendulum swing-up (the paper's source IP)."""
+    physics = make_physics(params)
+    return _environment(physics, Task(as_params(params), random=random), time_limit, environment_kwargs)
+
+
+def swingup_timevarying(
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    random: Any = None,
+    environment_kwargs: dict[str, Any] | None = None,
+    params: PendulumParams | None = None,
+) -> common.Environment:
+    """Swing-up with length and mass following :func:`timevarying_schedule` every step."""
+    params = as_params(params)
+    for name in ("length", "mass"):
+        if getattr(params, name) <= SCHEDULE_AMPLITUDE:
+            raise ValueError(
+                f"PendulumParams.{name} must exceed {SCHEDULE_AMPLITUDE} for swingup_timevarying "
+                f"(the schedule subtracts up to {SCHEDULE_AMPLITUDE}), got {getattr(params, name)!r}"
+            )
+    physics = make_physics(params)
+    task = Task(params, timevarying=True, random=random)
+    return _environment(physics, task, time_limit, environment_kwargs)
+
+
+def swingup_flipped(
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    random: Any = None,
+    environment_kwargs: dict[str, Any] | None = None,
+    params: PendulumParams | None = None,
+) -> common.Environment:
+    """Swing-up whose control acts with the opposite sign (the paper's negative transfer)."""
+    physics = make_physics(params, flipped=True)
+    return _environment(physics, Task(as_params(params), random=random), time_limit, environment_kwargs)
+
+
+def as_params(params: PendulumParams | None) -> PendulumParams:
+    """``params``, or the defaults when None; anything else raises ValueError."""
+    if params is None:
+        return PendulumParams()
+    if not isinstance(params, PendulumParams):
+        raise ValueError(f"params must be a PendulumParams, got {type(params).__name__}")
+    return params
+
+
+TASKS = {
+    "swingup": swingup,
+    "swingup_timevarying": swingup_timevarying,
+    "swingup_flipped": swingup_flipped,
+}

@@ -1,0 +1,68 @@
+"""`tatl render`: a clip of a method's policy on an experiment's target task.
+
+It reuses a finished ``tatl run`` folder when given one (the source policy,
+mapping and target data of that seed), and otherwise trains what it needs at
+the chosen preset. The policy is the one the method learns from the preset's
+largest target-sample budget.
+"""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+
+from tatl_mj import render, suite
+from tatl_mj.experiments import pipeline
+from tatl_mj.experiments.records import RunDirectory
+from tatl_mj.experiments.spec import load_spec
+from tatl_mj.transfer import method as method_mod
+
+CLIP_METHODS = ("ta-tl", "uma-tl", "rl", "random")
+
+
+def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceArtifacts:
+    if run_dir is not None:
+        blob = RunDirectory(run_dir).blob_path(spec.name, seed)
+        if blob.exists():
+            return pickle.loads(blob.read_bytes())
+        print(f"note: {blob} not found; training seed {seed} at preset {preset} instead")
+    return pipeline.learn_source(spec, spec.preset(preset), seed)
+
+
+def render_from_spec(
+    spec_path: str, *, method: str, seed: int, out: str, seconds: float = 5.0, width: int = 640,
+    height: int = 480, fps: int = 30, preset: str = "smoke", run_dir: str | None = None,
+    with_source: bool = False,
+) -> Path:
+    if method not in CLIP_METHODS:
+        raise ValueError(f"unknown method {method!r}; valid methods: {list(CLIP_METHODS)}")
+    suffix = Path(out).suffix.lower()
+    if suffix not in (".mp4", ".gif"):
+        raise ValueError(f"clip path must end in .mp4 or .gif, got {out!r}")
+    spec = load_spec(spec_path)
+    chosen = spec.preset(preset)
+    target = spec.target
+    needs_artifacts = method != "random" or with_source
+    artifacts = _artifacts(spec, preset, seed, run_dir) if needs_artifacts else None
+    if method == "random":
+        policy = pipeline.random_policy(target.domain, pipeline.derive_seed(seed, "random-policy"))
+    else:
+        problem = pipeline.transfer_problem(spec, artifacts, seed)
+        budget = max(chosen.target_budgets)
+        policy = method_mod.METHODS[method].learn(problem, artifacts.target_stream.head(budget))
+    kwargs = {**target.task_kwargs, "random": pipeline.derive_seed(seed, spec.name, "clip")}
+    env = suite.load(target.domain, target.task, task_kwargs=kwargs)
+    source = None
+    if with_source:
+        src = spec.source
+        source_env = suite.load(src.domain, src.task, task_kwargs={**src.task_kwargs, "random": 0})
+        mapping = artifacts.mapping
+        source = (source_env, lambda state: mapping.chi_plus(np.asarray(state)[None])[0])
+    frames = render.render_episode(
+        env, policy, seconds=seconds, width=width, height=height, fps=fps,
+        method_label=f"{method.upper()} on {target.domain}/{target.task}", source=source,
+    )
+    render.write_clip(frames, out, fps)
+    return Path(out)

@@ -1,0 +1,230 @@
+"""The batch runner: work units over a local process pool or a Ray cluster, resumable.
+
+Work units come in two phases. Phase one, per (experiment, seed): learn the
+source policy and the mapping and draw the target data (cached on disk and
+reused by every method). Phase two, per (experiment, seed, method): one
+method's learning curve. Workers return their results; only this process
+writes, each record atomically, so a crash or a kill loses no finished unit
+and a rerun of the same command resumes where it stopped. A failing unit is
+reported (traceback in DIR/failures/) and does not take the others down.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pickle
+import platform
+import sys
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+from tqdm import tqdm
+
+from tatl_mj.experiments import pipeline, summary as summary_mod
+from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
+from tatl_mj.experiments.spec import ExperimentSpec, spec_to_dict
+
+METHODS = ("ta-tl", "uma-tl", "rl")
+EXECUTORS = ("local", "ray")
+SOURCE_UNIT = "source"
+
+
+@dataclasses.dataclass(frozen=True)
+class Unit:
+    experiment: str
+    seed: int
+    name: str  # "source" or a method name
+
+    def __str__(self) -> str:
+        return f"{self.experiment}/seed{self.seed}/{self.name}"
+
+
+def work(spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes | None) -> dict:
+    """Runs one unit in a worker; never raises (a failure is returned as data)."""
+    start = time.perf_counter()
+    try:
+        preset = spec.preset(preset_name)
+        if unit.name == SOURCE_UNIT:
+            artifacts = pipeline.learn_source(spec, preset, unit.seed)
+            blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
+            record = {
+                "experiment": spec.name, "seed": unit.seed, "random_return": artifacts.random_return,
+                "source_samples": artifacts.source_samples,
+                "mapping_source_samples": artifacts.mapping_source_samples,
+                "mapping_target_samples": artifacts.mapping_target_samples,
+                "timings": artifacts.timings,
+            }
+        else:
+            artifacts = pickle.loads(source_blob)
+            blob = None
+            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts)
+        record["wall_s"] = time.perf_counter() - start
+        return {"record": record, "blob": blob}
+    except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
+        return {"error": traceback.format_exc()}
+
+
+# --- executors ------------------------------------------------------------------
+
+Job = tuple[Unit, tuple]
+
+
+def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
+    if workers <= 1:
+        for unit, args in jobs:
+            yield unit, work(*args)
+        return
+    import multiprocessing
+
+    # spawn: MuJoCo/GL state must not be forked into workers.
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(work, *args): unit for unit, args in jobs}
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                try:
+                    result = future.result()
+                except Exception:  # noqa: BLE001 - e.g. a worker killed by the OS
+                    result = {"error": traceback.format_exc()}
+                yield futures[future], result
+
+
+def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Unit, dict]]:
+    try:
+        import ray
+    except ImportError:
+        raise SystemExit(
+            "--executor ray needs Ray: pip install 'tatl-mj[ray]' (or pip install 'ray>=2.9,<3')"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+        if address:
+            kwargs["address"] = address
+        else:
+            kwargs["num_cpus"] = max(workers, 1)
+        ray.init(**kwargs)
+    try:
+        remote = ray.remote(num_cpus=1)(work)
+        refs = {remote.remote(*args): unit for unit, args in jobs}
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                try:
+                    result = ray.get(ref)
+                except Exception:  # noqa: BLE001 - a lost node or worker
+                    result = {"error": traceback.format_exc()}
+                yield refs[ref], result
+    finally:
+        if started:
+            ray.shutdown()
+
+
+# --- the run ----------------------------------------------------------------------
+
+def _versions() -> dict:
+    names = ("tatl-mj", "mujoco", "dm-control", "numpy", "scipy", "scikit-learn")
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSpec]) -> None:
+    """Refuses to mix presets in one folder (records of different budgets would blend)."""
+    manifest = {"preset": preset}
+    if run_dir.manifest.exists():
+        old = read_json(run_dir.manifest)
+        if old.get("preset") != preset:
+            raise SystemExit(
+                f"{run_dir.root} holds a run with preset {old.get('preset')!r}; "
+                f"use another --out for preset {preset!r}"
+            )
+        experiments = sorted(set(old.get("experiments", [])) | {s.name for s in specs})
+    else:
+        experiments = sorted(s.name for s in specs)
+    write_json(run_dir.manifest, {**manifest, "experiments": experiments})
+
+
+def run(
+    specs: list[ExperimentSpec],
+    preset: str,
+    seeds: Iterable[int],
+    out: str | Path,
+    workers: int = 2,
+    executor: str = "local",
+    address: str | None = None,
+    methods: Iterable[str] = METHODS,
+    progress: bool = True,
+) -> dict:
+    """Runs (or resumes) every unit; writes and returns the summary."""
+    if executor not in EXECUTORS:
+        raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"two specs share an experiment name: {names}")
+    for spec in specs:
+        spec.preset(preset)  # fail before any work on an unknown preset
+    seeds, methods = list(seeds), list(methods)
+    run_dir = RunDirectory(out)
+    _check_manifest(run_dir, preset, specs)
+    start = time.perf_counter()
+
+    def dispatch(jobs: list[Job]) -> Iterator[tuple[Unit, dict]]:
+        return _ray(jobs, workers, address) if executor == "ray" else _local(jobs, workers)
+
+    by_name = {s.name: s for s in specs}
+    all_units = [Unit(s.name, seed, name) for s in specs for seed in seeds for name in [SOURCE_UNIT, *methods]]
+    done = {u for u in all_units if run_dir.record_path(u.experiment, u.seed, u.name).exists()}
+    failures: list[str] = []
+    bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
+
+    def record(unit: Unit, result: dict) -> None:
+        if "error" in result:
+            path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
+            write_atomic(path, result["error"].encode())
+            failures.append(f"{unit}: {result['error'].strip().splitlines()[-1]} (see {path})")
+            bar.write(f"FAILED {unit}: {result['error'].strip().splitlines()[-1]}")
+        else:
+            if result.get("blob") is not None:
+                write_atomic(run_dir.blob_path(unit.experiment, unit.seed), result["blob"])
+            write_json(run_dir.record_path(unit.experiment, unit.seed, unit.name), result["record"])
+            done.add(unit)
+        bar.update(1)
+
+    sources = [u for u in all_units if u.name == SOURCE_UNIT and u not in done]
+    for unit, result in dispatch([(u, (by_name[u.experiment], preset, u, None)) for u in sources]):
+        record(unit, result)
+
+    jobs = []
+    for unit in all_units:
+        if unit.name == SOURCE_UNIT or unit in done:
+            continue
+        source = Unit(unit.experiment, unit.seed, SOURCE_UNIT)
+        if source not in done:
+            failures.append(f"{unit}: skipped, its source unit failed")
+            bar.update(1)
+            continue
+        blob = run_dir.blob_path(unit.experiment, unit.seed).read_bytes()
+        jobs.append((unit, (by_name[unit.experiment], preset, unit, blob)))
+    for unit, result in dispatch(jobs):
+        record(unit, result)
+    bar.close()
+
+    summary = summary_mod.build(
+        run_dir, specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=methods,
+        versions=_versions(), wall_s=time.perf_counter() - start, workers=workers, executor=executor,
+        failures=failures,
+    )
+    write_json(run_dir.summary, summary)
+    return summary
+

@@ -1,0 +1,352 @@
+"""Headless clips of a policy acting in a tatl-mj task (optionally beside its source).
+
+Choose the GL backend first, then render and write:
+
+>>> from tatl_mj import gl
+>>> gl.select_backend()                      # before mujoco / dm_control are imported
+>>> from tatl_mj import render, suite
+>>> env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+>>> frames = render.render_episode(env, policy, seconds=4, method_label="ta-tl")
+>>> render.write_clip(frames, "cartpole.mp4", fps=30)
+
+How a clip is made
+  - The environment is reset once and stepped at its own control rate; a frame is
+    drawn only when one is due (clip time ``k / fps``), showing the state after
+    the last step at or before that time. Nothing here runs unless a clip is
+    asked for, so simulation and training are never slowed by rendering.
+  - MuJoCo tasks are drawn with ``mujoco.Renderer`` from the model's camera
+    (``"tracking"`` by default, which follows the system); the grid world, which
+    has no MuJoCo model, is drawn with numpy and Pillow.
+  - Overlay (top left, small): episode time, method label and running return.
+    Each panel is labelled with its domain at the bottom left.
+  - Episode end: with ``on_end="freeze"`` (default) the last frame is held for the
+    rest of the clip with the reason (terminal state, time limit or diverged); with
+    ``on_end="reset"`` a new episode starts and the overlay counts episodes.
+  - Side by side (``source=(source_env, source_state_fn)``): for every frame the
+    source system is put in the mapped state ``source_state_fn(target_state)`` and
+    drawn to the right of the target; the clip is then ``2 * width`` wide.
+  - Render contexts are created per clip and freed before returning, so the
+    process exits without GL clean-up errors.
+
+Memory: a 640x480 frame is 0.9 MB, so ``render_episode`` holds about 28 MB per
+second of clip at 30 fps; :func:`iter_frames` streams frames instead, and
+:func:`write_clip` accepts either.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import imageio.v2 as imageio_v2
+import imageio.v3 as imageio_v3
+import mujoco
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+Policy = Callable[[np.ndarray], np.ndarray]
+SourceSpec = tuple[Any, Callable[[np.ndarray], np.ndarray]]
+
+END_MODES: tuple[str, ...] = ("freeze", "reset")
+CLIP_EXTENSIONS: tuple[str, ...] = (".mp4", ".gif")
+GRID_STEP_SECONDS = 0.25  # grid-world steps have no duration: show four per second
+
+
+def render_episode(
+    env: Any,
+    policy: Policy,
+    *,
+    seconds: float,
+    width: int = 640,
+    height: int = 480,
+    fps: float = 30,
+    method_label: str = "",
+    camera: str = "tracking",
+    source: SourceSpec | None = None,
+    on_end: str = "freeze",
+) -> np.ndarray:
+    """Films ``policy`` acting in ``env``; returns frames ``(round(seconds * fps), H, W, 3)`` uint8.
+
+    Args:
+      env: a tatl-mj (or dm_control) environment, or the grid world.
+      policy: maps a batched state ``(1, d)`` to action values ``(1, m)`` (or
+        action indices ``(1,)`` for the grid world).
+      seconds: clip length in simulated seconds (grid world: steps times
+        ``GRID_STEP_SECONDS``).
+      width, height: size of each panel in pixels (at most the model's
+        offscreen buffer, 1280x960 for tatl-mj models).
+      fps: frames per second of the clip.
+      method_label: shown in the overlay, e.g. ``"ta-tl"``.
+      camera: the model's camera to film from.
+      source: ``(source_env, source_state_fn)`` to show the source system, put in
+        the mapped state ``source_state_fn(target_state)`` (a ``(d,)`` state to a
+        ``(d_s,)`` state), to the right of the target; the frames are then
+        ``2 * width`` wide.
+      on_end: ``"freeze"`` holds the last frame when the episode ends,
+        ``"reset"`` starts a new one.
+    """
+    frames = None
+    for k, frame in enumerate(iter_frames(
+        env, policy, seconds=seconds, width=width, height=height, fps=fps,
+        method_label=method_label, camera=camera, source=source, on_end=on_end,
+    )):
+        if frames is None:
+            frames = np.empty((_frame_count(seconds, fps),) + frame.shape, np.uint8)
+        frames[k] = frame
+    return frames
+
+
+def iter_frames(
+    env: Any,
+    policy: Policy,
+    *,
+    seconds: float,
+    width: int = 640,
+    height: int = 480,
+    fps: float = 30,
+    method_label: str = "",
+    camera: str = "tracking",
+    source: SourceSpec | None = None,
+    on_end: str = "freeze",
+) -> Iterator[np.ndarray]:
+    """Like :func:`render_episode`, but yields the frames one by one (constant memory).
+
+    A yielded array may be yielded again (a frozen end), so copy it to keep it.
+    """
+    n_frames = _frame_count(seconds, fps)
+    _check_size("width", width)
+    _check_size("height", height)
+    if on_end not in END_MODES:
+        raise ValueError(f"on_end must be one of {END_MODES}, got {on_end!r}")
+    if source is not None and (not isinstance(source, tuple) or len(source) != 2
+                               or not callable(source[1])):
+        raise ValueError("source must be a tuple (source_env, source_state_fn)")
+
+    step_seconds = _step_seconds(env)
+    with contextlib.ExitStack() as stack:
+        paint = _painter(env, width, height, camera, stack)
+        paint_source = None
+        if source is not None:
+            source_env, source_state_fn = source
+            source_env.reset()
+            paint_source = _painter(source_env, width, height, camera, stack)
+        target_name = _domain_name(env)
+        source_name = None if source is None else _domain_name(source[0])
+
+        timestep = env.reset()
+        elapsed, episode_steps, episode, episode_return = 0.0, 0, 1, 0.0
+        ended = ""
+        frozen_frame = None
+        for k in range(n_frames):
+            if frozen_frame is not None:
+                yield frozen_frame
+                continue
+            # Step until the next step would pass this frame's time.
+            while not ended and elapsed + step_seconds <= k / fps + 1e-9:
+                timestep = env.step(_action(policy, _state(timestep)))
+                elapsed += step_seconds
+                episode_steps += 1
+                episode_return += float(timestep.reward or 0.0)
+                if timestep.last():
+                    ended = _end_reason(env, timestep)
+                    if on_end == "reset":
+                        timestep = env.reset()
+                        episode += 1
+                        episode_steps, episode_return, ended = 0, 0.0, ""
+
+            state = _state(timestep)
+            text = f"t {episode_steps * step_seconds:5.2f} s"
+            if method_label:
+                text += f"   {method_label}"
+            text += f"   return {episode_return:.1f}"
+            if on_end == "reset":
+                text += f"   episode {episode}"
+            if ended:
+                text += f"   [{ended}]"
+            image = _label(paint(), text, "top")
+            image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
+            if paint_source is not None:
+                mapped = np.asarray(source_state_fn(state), dtype=np.float64).reshape(-1)
+                _set_state(source_env, mapped)
+                right = _label(paint_source(), f"source: {source_name} (mapped state)", "bottom")
+                right[:, :2] = 40  # a thin divider between the panels
+                image = np.concatenate([image, right], axis=1)
+            if ended:
+                frozen_frame = image
+            yield image
+
+
+def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps: float) -> Path:
+    """Writes RGB uint8 frames ``(n, H, W, 3)`` to ``.mp4`` (H.264, yuv420p) or ``.gif``.
+
+    Odd sizes are padded by one edge pixel to even (H.264 with yuv420p needs even
+    sizes). Returns the path written.
+    """
+    path = Path(path)
+    extension = path.suffix.lower()
+    if extension not in CLIP_EXTENSIONS:
+        raise ValueError(
+            f"path {str(path)!r}: clip extension must be one of {CLIP_EXTENSIONS}, got {extension!r}"
+        )
+    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number, got {fps!r}")
+    checked = (_check_frame(i, frame) for i, frame in enumerate(frames))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if extension == ".gif":
+        stack = list(checked)
+        if not stack:
+            raise ValueError("frames is empty: a clip needs at least one frame")
+        # GIF delays are whole centiseconds; Pillow rounds the duration (ms).
+        imageio_v3.imwrite(path, np.stack(stack), extension=".gif", duration=1000.0 / fps, loop=0)
+        return path
+    count = 0
+    with imageio_v2.get_writer(
+        path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+        pixelformat="yuv420p", macro_block_size=2, quality=5,
+    ) as writer:
+        for frame in checked:
+            pad = ((0, frame.shape[0] % 2), (0, frame.shape[1] % 2), (0, 0))
+            writer.append_data(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame)
+            count += 1
+    if count == 0:
+        path.unlink(missing_ok=True)
+        raise ValueError("frames is empty: a clip needs at least one frame")
+    return path
+
+
+# --- Painters -----------------------------------------------------------------
+
+def _painter(env: Any, width: int, height: int, camera: str,
+             stack: contextlib.ExitStack) -> Callable[[], np.ndarray]:
+    """A function drawing ``env``'s current state as an (height, width, 3) uint8 image."""
+    physics = getattr(env, "physics", None)
+    if physics is None:
+        return _grid_painter(env, width, height)
+    model = physics.model
+    camera_id = mujoco.mj_name2id(model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    if camera_id < 0:
+        cameras = [model.id2name(i, "camera") for i in range(model.ncam)]
+        raise ValueError(
+            f"camera {camera!r} is not in the {_domain_name(env)} model; valid choices: {cameras}"
+        )
+    renderer = None
+
+    def close() -> None:
+        if renderer is not None:
+            renderer.close()
+
+    stack.callback(close)
+
+    def paint() -> np.ndarray:
+        nonlocal renderer
+        # A task may recompile its model (e.g. new parameters per episode).
+        if renderer is None or renderer.model is not physics.model.ptr:
+            close()
+            renderer = mujoco.Renderer(physics.model.ptr, height, width)
+        renderer.update_scene(physics.data.ptr, camera=camera_id)
+        return renderer.render()
+
+    return paint
+
+
+def _grid_painter(env: Any, width: int, height: int) -> Callable[[], np.ndarray]:
+    raise NotImplementedError("grid world drawing lands with the grid world")
+
+
+# --- Overlay --------------------------------------------------------------------
+
+def _label(image: np.ndarray, text: str, where: str) -> np.ndarray:
+    """Writes ``text`` on a darkened strip at the top or bottom left of ``image``."""
+    height = image.shape[0]
+    font = _font(max(11, round(height / 30)))  # 16 px at 480 rows
+    margin = max(4, round(font.size / 3))
+    left, top, right, bottom = font.getbbox(text)
+    y = margin if where == "top" else height - (bottom - top) - 3 * margin
+    pixels = np.array(image, dtype=np.uint8)
+    pixels[y:y + bottom - top + 2 * margin, :right + 3 * margin] //= 3  # dark strip: legible
+    canvas = Image.fromarray(pixels)
+    ImageDraw.Draw(canvas).text((margin, y + margin - top), text, font=font, fill=(255, 255, 255))
+    return np.array(canvas)
+
+
+_FONTS: dict[int, ImageFont.ImageFont] = {}
+
+
+def _font(size: int) -> Any:
+    if size not in _FONTS:
+        _FONTS[size] = ImageFont.load_default(size=size)
+    return _FONTS[size]
+
+
+# --- Helpers ------------------------------------------------------------------
+
+def _frame_count(seconds: float, fps: float) -> int:
+    for name, value in (("seconds", seconds), ("fps", fps)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} must be a positive number, got {value!r}")
+    n = int(round(seconds * fps))
+    if n < 1:
+        raise ValueError(f"seconds * fps = {seconds * fps:g} gives no frame; ask for at least 1")
+    return n
+
+
+def _check_size(name: str, value: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 16:
+        raise ValueError(f"{name} must be an integer >= 16 pixels, got {value!r}")
+
+
+def _check_frame(index: int, frame: np.ndarray) -> np.ndarray:
+    frame = np.asarray(frame)
+    if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+        raise ValueError(
+            f"frames[{index}] must be an (H, W, 3) uint8 RGB image, got shape "
+            f"{frame.shape} dtype {frame.dtype}"
+        )
+    return frame
+
+
+def _step_seconds(env: Any) -> float:
+    if hasattr(env, "physics"):
+        return float(env.control_timestep())
+    return GRID_STEP_SECONDS
+
+
+def _state(timestep: Any) -> np.ndarray:
+    observation = timestep.observation
+    if isinstance(observation, dict) and "state" in observation:
+        return np.asarray(observation["state"], dtype=np.float64)
+    if isinstance(observation, dict):
+        # dm_control's own suite: the flattened observation stands in for the state.
+        return np.concatenate([np.ravel(v) for v in observation.values()]).astype(np.float64)
+    return np.asarray(observation, dtype=np.float64)
+
+
+def _action(policy: Policy, state: np.ndarray) -> np.ndarray:
+    action = np.asarray(policy(state[None]))
+    if action.ndim == 0 or action.shape[0] != 1:
+        raise ValueError(
+            f"policy must map a (1, {state.size}) state batch to a batch of one action, "
+            f"got shape {action.shape}"
+        )
+    return action[0]
+
+
+def _set_state(env: Any, state: np.ndarray) -> None:
+    physics = getattr(env, "physics", None)
+    (physics if physics is not None else env).set_state_vector(state)
+
+
+def _end_reason(env: Any, timestep: Any) -> str:
+    if getattr(env, "diverged", None):
+        return "diverged"
+    return "terminal state" if timestep.discount == 0 else "time limit"
+
+
+def _domain_name(env: Any) -> str:
+    physics = getattr(env, "physics", None)
+    owner = type(physics) if physics is not None else type(env)
+    return owner.__module__.rsplit(".", 1)[-1]

@@ -1,0 +1,272 @@
+"""Basis functions phi(s) for linear Q-functions (FQI) and the target apprentice.
+
+The paper approximates Q (Phase I) and the target model (eq. ``Apprentice_model``,
+``s' = W phi(s) + B a``) with a single layer of fixed bases. Three are provided:
+
+- :class:`RBF`: Gaussian radial basis functions with given centres and a diagonal
+  or full bandwidth (the paper's 20 centres, sigma = 1.2 I for the pendulum and
+  diag(0.3, 0.1) for mountain car), plus an optional constant;
+- :class:`LinearFeatures`: ``[1, s]`` (the paper's plain linear basis for cart-pole);
+- :class:`OneHot`: a tabular indicator of a grid-world cell ``[row, col]``.
+
+Every basis is a frozen dataclass with ``__call__(states (N, d)) -> (N, k)`` float64
+and ``size(state_dim) -> k``. :func:`make_features` builds one from a plain dict.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from typing import Any, Protocol, Sequence, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class Features(Protocol):
+    """A fixed basis phi: (N, d) states -> (N, k) float64."""
+
+    def __call__(self, states: np.ndarray) -> np.ndarray: ...
+
+    def size(self, state_dim: int) -> int: ...
+
+
+def as_states(states: Any, name: str = "states", dim: int | None = None) -> np.ndarray:
+    """Checks a batch of states: 2-D float64, finite, ``dim`` columns when given."""
+    s = np.asarray(states, dtype=np.float64)
+    if s.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D array (N, d), got shape {s.shape}")
+    if dim is not None and s.shape[1] != dim:
+        raise ValueError(f"{name} must have {dim} columns, got shape {s.shape}")
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return s
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RBF:
+    """Gaussian radial basis functions ``phi_j(s) = exp(-|L^-1 (s - c_j)|^2 / 2)``.
+
+    Attributes:
+      centers: (k, d) centres c_j.
+      sigma: the bandwidth L: (d,) per-coordinate widths (L = diag(sigma), in
+        state units) or a (d, d) matrix (e.g. 1.2 I); it must be invertible.
+      bias: prepend a constant 1 (so ``size = k + 1``).
+    """
+
+    centers: np.ndarray
+    sigma: np.ndarray
+    bias: bool = True
+
+    def __post_init__(self) -> None:
+        centers = np.atleast_2d(np.asarray(self.centers, dtype=np.float64))
+        if centers.ndim != 2 or centers.shape[0] == 0:
+            raise ValueError(f"RBF.centers must be a non-empty (k, d) array, got shape {centers.shape}")
+        if not np.all(np.isfinite(centers)):
+            raise ValueError("RBF.centers contains NaN or infinite values")
+        d = centers.shape[1]
+        sigma = np.asarray(self.sigma, dtype=np.float64)
+        if sigma.ndim == 0:
+            sigma = np.full(d, float(sigma))
+        if sigma.shape == (d,):
+            if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
+                raise ValueError(f"RBF.sigma must be finite and > 0, got {sigma}")
+            sigma = np.diag(sigma)
+        elif sigma.shape != (d, d):
+            raise ValueError(f"RBF.sigma must have shape ({d},) or ({d}, {d}), got {sigma.shape}")
+        if not np.all(np.isfinite(sigma)) or np.linalg.cond(sigma) > 1e12:
+            raise ValueError(f"RBF.sigma must be a finite invertible matrix, got {sigma.tolist()}")
+        object.__setattr__(self, "centers", centers)
+        object.__setattr__(self, "sigma", sigma)
+        # Centres and states are whitened by L once, so a call is one distance matrix.
+        inverse = np.linalg.inv(sigma)
+        object.__setattr__(self, "_inverse", inverse)
+        object.__setattr__(self, "_scaled_centers", centers @ inverse.T)
+
+    @staticmethod
+    def grid(
+        low: Sequence[float],
+        high: Sequence[float],
+        n_centers: int | Sequence[int],
+        sigma: Any,
+        bias: bool = True,
+    ) -> "RBF":
+        """Centres on a regular grid spanning the box ``[low, high]`` (ends included).
+
+        ``n_centers`` is either the count per dimension (a sequence) or a total
+        (an int), which is split into per-dimension counts whose product is
+        exactly that total, as even as possible, with more centres along the
+        dimensions that are wider relative to ``sigma`` (20 in 2-D gives 5 x 4).
+        A dimension with one centre puts it in the middle of the box.
+        """
+        lo = np.asarray(low, dtype=np.float64).ravel()
+        hi = np.asarray(high, dtype=np.float64).ravel()
+        if lo.shape != hi.shape or lo.size == 0:
+            raise ValueError(f"RBF.grid low and high must be equal-length vectors, got {lo.shape} and {hi.shape}")
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
+            raise ValueError(f"RBF.grid needs finite low < high, got low={lo.tolist()} high={hi.tolist()}")
+        d = lo.size
+        if isinstance(n_centers, (int, np.integer)):
+            sig = np.asarray(sigma, dtype=np.float64)
+            widths = np.diag(sig) if sig.ndim == 2 else np.broadcast_to(sig, (d,))
+            counts = _split_count(int(n_centers), (hi - lo) / np.abs(widths))
+        else:
+            counts = [int(c) for c in n_centers]
+            if len(counts) != d or min(counts) < 1:
+                raise ValueError(f"RBF.grid n_centers must be {d} positive counts, got {list(n_centers)}")
+        axes = [
+            np.linspace(l, h, c) if c > 1 else np.array([(l + h) / 2])
+            for l, h, c in zip(lo, hi, counts)
+        ]
+        centers = np.array(list(itertools.product(*axes)), dtype=np.float64)
+        return RBF(centers, sigma, bias)
+
+    def size(self, state_dim: int) -> int:
+        return len(self.centers) + int(self.bias)
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        s = as_states(states, dim=self.centers.shape[1]) @ self._inverse.T
+        sq = (
+            np.einsum("ij,ij->i", s, s)[:, None]
+            - 2.0 * s @ self._scaled_centers.T
+            + np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)[None, :]
+        )
+        phi = np.exp(-0.5 * np.maximum(sq, 0.0))
+        return np.hstack([np.ones((len(s), 1)), phi]) if self.bias else phi
+
+
+def _split_count(total: int, spans: np.ndarray) -> list[int]:
+    """Per-dimension counts with product ``total``: as even as possible, more on wide spans."""
+    if total < 1:
+        raise ValueError(f"RBF.grid n_centers must be >= 1, got {total}")
+    d = len(spans)
+
+    def factorisations(n: int, parts: int) -> list[tuple[int, ...]]:
+        if parts == 1:
+            return [(n,)]
+        out = []
+        for f in range(1, n + 1):
+            if n % f == 0:
+                out.extend((f,) + rest for rest in factorisations(n // f, parts - 1))
+        return out
+
+    if total > 10_000:
+        raise ValueError(f"RBF.grid n_centers={total} is too many; give per-dimension counts")
+    # Evenness first, then wide-span dimensions get the larger counts.
+    best = min(factorisations(total, d), key=lambda f: (max(f) - min(f), sorted(f)))
+    order = np.argsort(-spans, kind="stable")
+    counts = [0] * d
+    for dim, count in zip(order, sorted(best, reverse=True)):
+        counts[int(dim)] = count
+    return counts
+
+
+@dataclasses.dataclass(frozen=True)
+class LinearFeatures:
+    """``phi(s) = [1, s]`` (or ``s`` when ``bias`` is False)."""
+
+    bias: bool = True
+
+    def size(self, state_dim: int) -> int:
+        return state_dim + int(self.bias)
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        s = as_states(states)
+        return np.hstack([np.ones((len(s), 1)), s]) if self.bias else s.copy()
+
+
+@dataclasses.dataclass(frozen=True)
+class OneHot:
+    """Tabular indicator of a grid cell: state ``[row, col]`` -> e_{row * n_cols + col}.
+
+    Rows and columns must be integers (within 1e-9) inside the grid; anything
+    else raises ValueError, since a tabular basis cannot generalise.
+    """
+
+    n_rows: int
+    n_cols: int
+
+    def __post_init__(self) -> None:
+        for name in ("n_rows", "n_cols"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"OneHot.{name} must be a positive integer, got {value!r}")
+
+    def size(self, state_dim: int) -> int:
+        return self.n_rows * self.n_cols
+
+    def index(self, states: np.ndarray) -> np.ndarray:
+        """(N, 2) cells [row, col] -> (N,) int64 indices ``row * n_cols + col``."""
+        s = as_states(states, dim=2)
+        cells = np.rint(s)
+        if np.any(np.abs(s - cells) > 1e-9):
+            raise ValueError("OneHot states must be integer [row, col] cells")
+        rows, cols = cells[:, 0].astype(np.int64), cells[:, 1].astype(np.int64)
+        if np.any((rows < 0) | (rows >= self.n_rows) | (cols < 0) | (cols >= self.n_cols)):
+            raise ValueError(f"OneHot states must lie in the {self.n_rows} x {self.n_cols} grid")
+        return rows * self.n_cols + cols
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        idx = self.index(states)
+        phi = np.zeros((len(idx), self.n_rows * self.n_cols))
+        phi[np.arange(len(idx)), idx] = 1.0
+        return phi
+
+
+FEATURE_KINDS = ("rbf", "linear", "onehot")
+_FEATURE_KEYS = {
+    "rbf": {"kind", "centers", "low", "high", "sigma", "bias"},
+    "linear": {"kind", "bias"},
+    "onehot": {"kind", "n_rows", "n_cols"},
+}
+
+
+def make_features(spec: dict[str, Any], state_dim: int) -> Features:
+    """Builds a basis from a plain dict (e.g. a TOML table).
+
+    - ``{"kind": "rbf", "centers": 20, "low": [...], "high": [...], "sigma": [1.2, 1.2]}``:
+      ``centers`` is a total count, per-dimension counts, or an explicit (k, d)
+      list of centres (then ``low``/``high`` are not needed); ``bias`` defaults to True.
+    - ``{"kind": "linear", "bias": True}``
+    - ``{"kind": "onehot", "n_rows": 6, "n_cols": 9}``
+
+    Unknown kinds or keys raise ValueError listing the valid ones.
+    """
+    if not isinstance(spec, dict):
+        raise ValueError(f"features spec must be a dict, got {type(spec).__name__}")
+    kind = spec.get("kind")
+    if kind not in FEATURE_KINDS:
+        raise ValueError(f"features kind {kind!r} is unknown; valid kinds: {list(FEATURE_KINDS)}")
+    unknown = sorted(set(spec) - _FEATURE_KEYS[kind])
+    if unknown:
+        raise ValueError(f"unknown keys {unknown} in {kind} features spec; valid keys: {sorted(_FEATURE_KEYS[kind])}")
+    if kind == "linear":
+        return LinearFeatures(bias=bool(spec.get("bias", True)))
+    if kind == "onehot":
+        missing = sorted({"n_rows", "n_cols"} - set(spec))
+        if missing:
+            raise ValueError(f"onehot features spec lacks {missing}")
+        if state_dim != 2:
+            raise ValueError(f"onehot features need [row, col] states (state_dim 2), got state_dim {state_dim}")
+        return OneHot(int(spec["n_rows"]), int(spec["n_cols"]))
+    for key in ("centers", "sigma"):
+        if key not in spec:
+            raise ValueError(f"rbf features spec lacks {key!r}")
+    bias = bool(spec.get("bias", True))
+    centers = spec["centers"]
+    if isinstance(centers, (int, np.integer)) or np.ndim(centers) == 1:
+        missing = sorted({"low", "high"} - set(spec))
+        if missing:
+            raise ValueError(f"rbf features spec with a centre count needs {missing}")
+        if len(spec["low"]) != state_dim or len(spec["high"]) != state_dim:
+            raise ValueError(f"rbf features low/high must have state_dim={state_dim} entries")
+        return RBF.grid(spec["low"], spec["high"], centers, spec["sigma"], bias)
+    rbf = RBF(np.asarray(centers, dtype=np.float64), spec["sigma"], bias)
+    if rbf.centers.shape[1] != state_dim:
+        raise ValueError(f"rbf features centers have {rbf.centers.shape[1]} columns, state_dim is {state_dim}")
+    return rbf
+
+
+__all__ = [
+    "FEATURE_KINDS", "Features", "LinearFeatures", "OneHot", "RBF", "as_states", "make_features",
+]

@@ -1,0 +1,434 @@
+"""Fitted Q-Iteration (Ernst, Geurts & Wehenkel 2005): the paper's Phase I and the RL baseline.
+
+Given a batch of transitions (s_i, a_i, r_i, s'_i, absorbing_i) with discrete actions,
+FQI repeats for k = 1..K
+
+    y_i = r_i + gamma * (1 - absorbing_i) * max_a Q_{k-1}(s'_i, a),     Q_k = fit((s_i, a_i) -> y_i)
+
+from Q_0 = 0 or from a given ``initial_q`` (UMA-TL starts from the mapped source Q).
+Two regressors are provided:
+
+- :class:`LinearRegressor`: ``Q(s, a) = w_a . phi(s)`` (the paper's single layer of RBF or
+  linear bases), one ridge least-squares problem per action. The Gram matrices do not
+  change between iterations, so each is factorised once and an iteration costs one
+  matrix product and a few triangular solves;
+- :class:`ExtraTreesRegressor`: scikit-learn's extremely randomised trees on the input
+  ``(s, a)`` as in Ernst et al. (50 trees, min_samples_split 5, min_samples_leaf 2).
+
+:func:`q_iteration` is exact value iteration over a known deterministic tabular model
+(the grid-world source task, which the paper solves by Q-Iteration).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+import scipy.linalg
+from sklearn import ensemble
+
+from tatl_mj.transfer.features import Features, RBF, as_states, make_features
+from tatl_mj.transitions import Transitions
+
+
+@runtime_checkable
+class QFunction(Protocol):
+    """An action-value function over a discrete action set."""
+
+    n_actions: int
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        """(N, d) states -> (N, n_actions) Q-values."""
+        ...
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        """(N, d) states -> (N,) int64 index of the best action (lowest index on ties)."""
+        ...
+
+
+def _argmax(values: np.ndarray) -> np.ndarray:
+    return np.argmax(values, axis=1).astype(np.int64)
+
+
+# --- Regressors (configurations) ---------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class LinearRegressor:
+    """Linear-in-features Q: ``Q(s, a) = w_a . phi(s)``, fitted by ridge least squares.
+
+    ``ridge`` is added to the diagonal of each action's Gram matrix ``Phi_a^T Phi_a``;
+    with ``ridge = 0`` a rank-deficient basis raises ValueError instead of guessing.
+    """
+
+    features: Features
+    ridge: float = 1e-6
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.features, Features):
+            raise ValueError(f"LinearRegressor.features must be a basis (callable with size()), got {self.features!r}")
+        if not (math.isfinite(self.ridge) and self.ridge >= 0):
+            raise ValueError(f"LinearRegressor.ridge must be a finite number >= 0, got {self.ridge!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class ExtraTreesRegressor:
+    """Extremely randomised trees on ``(s, a)`` (Ernst et al. 2005), via scikit-learn.
+
+    ``seed`` fixes the trees' randomness; when None, :func:`fitted_q_iteration`
+    draws one from its ``rng`` (or uses 0 without one), so runs are reproducible.
+    """
+
+    n_estimators: int = 50
+    min_samples_split: int = 5
+    min_samples_leaf: int = 2
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        for name, least in (("n_estimators", 1), ("min_samples_split", 2), ("min_samples_leaf", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise ValueError(f"ExtraTreesRegressor.{name} must be an integer >= {least}, got {value!r}")
+
+
+Regressor = LinearRegressor | ExtraTreesRegressor
+REGRESSOR_KINDS = ("linear", "extra_trees")
+
+
+def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
+    """Builds a regressor from a plain dict.
+
+    - ``{"kind": "linear", "features": {<features spec>}, "ridge": 1e-6}``
+      (see :func:`tatl_mj.transfer.features.make_features`);
+    - ``{"kind": "extra_trees", "n_estimators": 50, "min_samples_split": 5,
+      "min_samples_leaf": 2, "seed": 0}``.
+    """
+    if not isinstance(spec, dict):
+        raise ValueError(f"regressor spec must be a dict, got {type(spec).__name__}")
+    kind = spec.get("kind")
+    valid = {
+        "linear": {"kind", "features", "ridge"},
+        "extra_trees": {"kind", "n_estimators", "min_samples_split", "min_samples_leaf", "seed"},
+    }
+    if kind not in valid:
+        raise ValueError(f"regressor kind {kind!r} is unknown; valid kinds: {list(REGRESSOR_KINDS)}")
+    unknown = sorted(set(spec) - valid[kind])
+    if unknown:
+        raise ValueError(f"unknown keys {unknown} in {kind} regressor spec; valid keys: {sorted(valid[kind])}")
+    if kind == "linear":
+        if "features" not in spec:
+            raise ValueError("linear regressor spec lacks 'features'")
+        return LinearRegressor(make_features(spec["features"], state_dim), float(spec.get("ridge", 1e-6)))
+    kwargs = {k: v for k, v in spec.items() if k != "kind"}
+    return ExtraTreesRegressor(**kwargs)
+
+
+# --- Fitted Q-functions -------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class LinearQ:
+    """``Q(s, a) = weights[a] . features(s)``; weights (n_actions, k)."""
+
+    features: Features
+    weights: np.ndarray
+
+    @property
+    def n_actions(self) -> int:
+        return len(self.weights)
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        return self.features(states) @ self.weights.T
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return _argmax(self.values(states))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TreeQ:
+    """A scikit-learn forest over inputs ``[s, a]`` (a: the action index)."""
+
+    forest: ensemble.ExtraTreesRegressor
+    n_actions: int
+    state_dim: int
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        s = as_states(states, dim=self.state_dim)
+        n = len(s)
+        inputs = np.hstack([np.tile(s, (self.n_actions, 1)), np.repeat(np.arange(self.n_actions), n)[:, None]])
+        return self.forest.predict(inputs).reshape(self.n_actions, n).T
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return _argmax(self.values(states))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ZeroQ:
+    """Q = 0 everywhere (FQI's Q_0 when no initial Q is given)."""
+
+    n_actions: int
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        return np.zeros((len(states), self.n_actions))
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return np.zeros(len(states), dtype=np.int64)
+
+
+# --- FQI ----------------------------------------------------------------------
+
+def _check_fqi_inputs(
+    transitions: Transitions, n_actions: int, gamma: float, iterations: int, initial_q: QFunction | None
+) -> None:
+    if not isinstance(transitions, Transitions):
+        raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
+    if len(transitions) == 0:
+        raise ValueError("transitions is empty; FQI needs at least one transition per action")
+    if isinstance(n_actions, bool) or not isinstance(n_actions, (int, np.integer)) or n_actions < 1:
+        raise ValueError(f"n_actions must be a positive integer, got {n_actions!r}")
+    if not (isinstance(gamma, (int, float)) and 0.0 <= gamma < 1.0):
+        raise ValueError(f"gamma must be in [0, 1), got {gamma!r}")
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
+        raise ValueError(f"iterations must be a positive integer, got {iterations!r}")
+    a = transitions.actions
+    if a.min() < 0 or a.max() >= n_actions:
+        raise ValueError(f"transitions.actions must be indices in 0..{n_actions - 1}, got range {a.min()}..{a.max()}")
+    if initial_q is not None and initial_q.n_actions != n_actions:
+        raise ValueError(f"initial_q has {initial_q.n_actions} actions, expected n_actions={n_actions}")
+
+
+def fitted_q_iteration(
+    transitions: Transitions,
+    n_actions: int,
+    regressor: Regressor,
+    gamma: float,
+    iterations: int,
+    initial_q: QFunction | None = None,
+    rng: np.random.Generator | None = None,
+) -> QFunction:
+    """Fitted Q-Iteration; returns Q_K (K = ``iterations``) with a greedy policy.
+
+    ``initial_q`` is Q_0, the bootstrap of the first iteration (UMA-TL); absorbing
+    transitions bootstrap nothing, a time limit (``last`` without ``absorbing``) does.
+    """
+    _check_fqi_inputs(transitions, n_actions, gamma, iterations, initial_q)
+    q0 = initial_q if initial_q is not None else ZeroQ(int(n_actions))
+    if isinstance(regressor, LinearRegressor):
+        return _fqi_linear(transitions, int(n_actions), regressor, gamma, int(iterations), q0)
+    if isinstance(regressor, ExtraTreesRegressor):
+        if regressor.seed is not None:
+            seed = int(regressor.seed)
+        else:
+            seed = int(rng.integers(2**31 - 1)) if rng is not None else 0
+        return _fqi_trees(transitions, int(n_actions), regressor, gamma, int(iterations), q0, seed)
+    raise ValueError(
+        f"regressor must be a LinearRegressor or ExtraTreesRegressor, got {type(regressor).__name__}"
+    )
+
+
+def _fqi_linear(
+    t: Transitions, n_actions: int, reg: LinearRegressor, gamma: float, iterations: int, q0: QFunction
+) -> LinearQ:
+    phi = reg.features(t.states)
+    phi_next = reg.features(t.next_states)
+    k = phi.shape[1]
+    continues = gamma * (~t.absorbing)
+    rows = [np.flatnonzero(t.actions == a) for a in range(n_actions)]
+    factors = []
+    for a, idx in enumerate(rows):
+        if len(idx) == 0:
+            raise ValueError(f"transitions contain no sample of action {a}; FQI cannot fit Q(., {a})")
+        if reg.ridge == 0 and np.linalg.matrix_rank(phi[idx]) < k:
+            raise ValueError(
+                f"features are rank-deficient on the {len(idx)} samples of action {a} "
+                f"(basis size {k}); use ridge > 0, more samples or fewer features"
+            )
+        gram = phi[idx].T @ phi[idx] + reg.ridge * np.eye(k)
+        factors.append(scipy.linalg.cho_factor(gram, check_finite=False))
+    next_values = q0.values(t.next_states)
+    weights = np.zeros((n_actions, k))
+    for _ in range(iterations):
+        y = t.rewards + continues * next_values.max(axis=1)
+        for a, idx in enumerate(rows):
+            weights[a] = scipy.linalg.cho_solve(factors[a], phi[idx].T @ y[idx], check_finite=False)
+        next_values = phi_next @ weights.T
+    return LinearQ(reg.features, weights)
+
+
+def _fqi_trees(
+    t: Transitions, n_actions: int, reg: ExtraTreesRegressor, gamma: float, iterations: int,
+    q0: QFunction, seed: int,
+) -> TreeQ:
+    missing = sorted(set(range(n_actions)) - set(np.unique(t.actions).tolist()))
+    if missing:
+        raise ValueError(f"transitions contain no sample of actions {missing}; FQI cannot fit Q for them")
+    if len(t) < reg.min_samples_split:
+        raise ValueError(f"too few transitions ({len(t)}) for min_samples_split={reg.min_samples_split}")
+    inputs = np.hstack([t.states, t.actions[:, None].astype(np.float64)])
+    continues = gamma * (~t.absorbing)
+    q: QFunction = q0
+    for _ in range(iterations):
+        y = t.rewards + continues * q.values(t.next_states).max(axis=1)
+        forest = ensemble.ExtraTreesRegressor(
+            n_estimators=reg.n_estimators,
+            min_samples_split=reg.min_samples_split,
+            min_samples_leaf=reg.min_samples_leaf,
+            random_state=seed,
+            n_jobs=1,
+        )
+        forest.fit(inputs, y)
+        q = TreeQ(forest, n_actions, t.state_dim)
+    return q
+
+
+# --- Exact Q-iteration on a tabular model -------------------------------------
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TabularQ:
+    """Q as a table q (S, n_actions).
+
+    ``values``/``greedy`` take either (N,) integer state indices, or (N, 2)
+    ``[row, col]`` cells when ``cells`` (S, 2), the cell of each index (the grid
+    world's ``cells`` array), was given. A cell not in ``cells`` raises ValueError.
+    """
+
+    q: np.ndarray
+    cells: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        q = np.asarray(self.q, dtype=np.float64)
+        if q.ndim != 2:
+            raise ValueError(f"TabularQ.q must be (S, n_actions), got shape {q.shape}")
+        object.__setattr__(self, "q", q)
+        if self.cells is not None:
+            cells = np.asarray(self.cells)
+            if cells.shape != (len(q), 2) or np.any(cells != np.rint(cells)) or cells.min() < 0:
+                raise ValueError(f"TabularQ.cells must be ({len(q)}, 2) non-negative integers [row, col]")
+            cells = cells.astype(np.int64)
+            lookup = np.full((cells[:, 0].max() + 1, cells[:, 1].max() + 1), -1, dtype=np.int64)
+            lookup[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+            object.__setattr__(self, "cells", cells)
+            object.__setattr__(self, "_lookup", lookup)
+
+    @property
+    def n_actions(self) -> int:
+        return self.q.shape[1]
+
+    def index(self, states: np.ndarray) -> np.ndarray:
+        """State indices (N,) from indices (N,) or [row, col] cells (N, 2)."""
+        s = np.asarray(states)
+        if s.ndim == 1:
+            idx = s.astype(np.int64)
+            if np.any(idx != s) or np.any((idx < 0) | (idx >= len(self.q))):
+                raise ValueError(f"TabularQ state indices must be integers in 0..{len(self.q) - 1}")
+            return idx
+        if self.cells is None:
+            raise ValueError("TabularQ got [row, col] states but was built without cells; pass indices")
+        rc = as_states(s, dim=2)
+        cells = np.rint(rc).astype(np.int64)
+        lookup = self._lookup
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < lookup.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < lookup.shape[1])
+        if np.any(np.abs(rc - cells) > 1e-9) or not np.all(inside):
+            raise ValueError("TabularQ states must be [row, col] cells of the grid")
+        idx = lookup[cells[:, 0], cells[:, 1]]
+        if np.any(idx < 0):
+            raise ValueError(f"TabularQ states {cells[idx < 0][:3].tolist()} are not cells of the grid")
+        return idx
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        return self.q[self.index(states)]
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return _argmax(self.values(states))
+
+
+def q_iteration(
+    next_state: np.ndarray,
+    reward: np.ndarray,
+    absorbing: np.ndarray,
+    gamma: float,
+    tol: float = 1e-10,
+    cells: np.ndarray | None = None,
+) -> TabularQ:
+    """Exact Q-iteration on a deterministic tabular model (Bellman optimality, to ``tol``).
+
+    ``Q(s, a) = reward[s, a] + gamma * (1 - absorbing[s, a]) * max_b Q(next_state[s, a], b)``,
+    iterated from 0 until the largest change is below ``tol`` (a gamma-contraction,
+    so it converges for gamma < 1). ``cells`` (S, 2) lets the result take [row, col] states.
+    """
+    nxt = np.asarray(next_state)
+    r = np.asarray(reward, dtype=np.float64)
+    done = np.asarray(absorbing, dtype=bool)
+    if nxt.ndim != 2 or r.shape != nxt.shape or done.shape != nxt.shape:
+        raise ValueError(
+            f"next_state, reward, absorbing must all be (S, A); got {nxt.shape}, {r.shape}, {done.shape}"
+        )
+    if not np.all(np.isfinite(r)):
+        raise ValueError("reward contains NaN or infinite values")
+    if np.any(nxt != np.rint(nxt)) or nxt.min() < 0 or nxt.max() >= len(nxt):
+        raise ValueError(f"next_state must hold state indices in 0..{len(nxt) - 1}")
+    if not (isinstance(gamma, (int, float)) and 0.0 <= gamma < 1.0):
+        raise ValueError(f"gamma must be in [0, 1), got {gamma!r}")
+    if not tol > 0:
+        raise ValueError(f"tol must be > 0, got {tol!r}")
+    nxt = nxt.astype(np.int64)
+    continues = gamma * (~done)
+    # Contraction bound: |Q_k - Q*| <= gamma^k |r|_max / (1 - gamma).
+    bound = np.abs(r).max() / (1.0 - gamma) if gamma > 0 else 0.0
+    limit = 1 + (math.ceil(math.log(tol / bound) / math.log(gamma)) if gamma > 0 and bound > tol else 1)
+    q = np.zeros_like(r)
+    for _ in range(limit + 10):
+        new = r + continues * q.max(axis=1)[nxt]
+        change = np.abs(new - q).max()
+        q = new
+        if change < tol:
+            break
+    return TabularQ(q, cells)
+
+
+# --- Benchmark ----------------------------------------------------------------
+
+def time_fqi(
+    n: int = 100_000,
+    n_actions: int = 3,
+    iterations: int = 20,
+    n_centers: int = 20,
+    gamma: float = 0.95,
+    seed: int = 0,
+) -> dict[str, float]:
+    """Times FQI with the RBF regressor on ``n`` synthetic pendulum-like transitions.
+
+    Returns seconds for building the data, and for the FQI call (features, factorisations
+    and all iterations), plus the sizes used. For ``tatl bench``.
+    """
+    rng = np.random.default_rng(seed)
+    start = time.perf_counter()
+    states = rng.uniform([-np.pi, -8.0], [np.pi, 8.0], size=(n, 2))
+    actions = rng.integers(n_actions, size=n)
+    torque = np.linspace(-2.0, 2.0, n_actions)[actions]
+    dt = 0.05
+    vel = states[:, 1] + dt * (9.81 * np.sin(states[:, 0]) + 3.0 * torque)
+    next_states = np.stack([states[:, 0] + dt * vel, vel], axis=1)
+    transitions = Transitions(
+        states, actions, np.cos(states[:, 0]), next_states,
+        np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
+    )
+    built = time.perf_counter()
+    features = RBF.grid([-np.pi, -8.0], [np.pi, 8.0], n_centers, [1.2, 1.2])
+    fitted_q_iteration(transitions, n_actions, LinearRegressor(features), gamma, iterations)
+    done = time.perf_counter()
+    return {
+        "n_transitions": float(n),
+        "n_actions": float(n_actions),
+        "iterations": float(iterations),
+        "n_features": float(features.size(2)),
+        "data_seconds": built - start,
+        "fqi_seconds": done - built,
+    }
+
+
+__all__ = [
+    "ExtraTreesRegressor", "LinearQ", "LinearRegressor", "QFunction", "REGRESSOR_KINDS", "Regressor",
+    "TabularQ", "TreeQ", "ZeroQ", "fitted_q_iteration", "make_regressor", "q_iteration", "time_fqi",
+]
