@@ -78,7 +78,8 @@ def test_time_limit_is_not_a_failure():
 
 
 @pytest.mark.parametrize(
-    "params", [cartpole.CartPoleParams(), cartpole.CartPoleParams(cart_mass=2.5, pole_mass=0.4, pole_half_length=0.8)]
+    "params",
+    [cartpole.CartPoleParams(), cartpole.CartPoleParams(cart_mass=2.5, pole_mass=0.4, pole_half_length=0.8)],
 )
 @pytest.mark.parametrize("force", [20.0, -7.0])
 def test_initial_accelerations_match_textbook_equations(params, force):
