@@ -104,13 +104,17 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
       (see :func:`tatl_mj.transfer.features.make_features`);
     - ``{"kind": "extra_trees", "n_estimators": 50, "min_samples_split": 5,
       "min_samples_leaf": 2, "seed": 0}``.
+
+    A learner section may carry both ``features`` and ``seed`` whatever its kind, so
+    ``seed`` is accepted and unused for "linear" (closed form, no randomness) and
+    ``features`` is accepted and unused for "extra_trees" (trees split raw states).
     """
     if not isinstance(spec, dict):
         raise ValueError(f"regressor spec must be a dict, got {type(spec).__name__}")
     kind = spec.get("kind")
     valid = {
-        "linear": {"kind", "features", "ridge"},
-        "extra_trees": {"kind", "n_estimators", "min_samples_split", "min_samples_leaf", "seed"},
+        "linear": {"kind", "features", "ridge", "seed"},
+        "extra_trees": {"kind", "n_estimators", "min_samples_split", "min_samples_leaf", "seed", "features"},
     }
     if kind not in valid:
         raise ValueError(f"regressor kind {kind!r} is unknown; valid kinds: {list(REGRESSOR_KINDS)}")
@@ -121,7 +125,7 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
         if "features" not in spec:
             raise ValueError("linear regressor spec lacks 'features'")
         return LinearRegressor(make_features(spec["features"], state_dim), float(spec.get("ridge", 1e-6)))
-    kwargs = {k: v for k, v in spec.items() if k != "kind"}
+    kwargs = {k: v for k, v in spec.items() if k not in ("kind", "features")}
     return ExtraTreesRegressor(**kwargs)
 
 
@@ -235,6 +239,7 @@ def _fqi_linear(
     k = phi.shape[1]
     continues = gamma * (~t.absorbing)
     rows = [np.flatnonzero(t.actions == a) for a in range(n_actions)]
+    phi_rows_t = []  # Phi_a^T, gathered once: the iterations only change the targets y
     factors = []
     for a, idx in enumerate(rows):
         if len(idx) == 0:
@@ -244,14 +249,15 @@ def _fqi_linear(
                 f"features are rank-deficient on the {len(idx)} samples of action {a} "
                 f"(basis size {k}); use ridge > 0, more samples or fewer features"
             )
-        gram = phi[idx].T @ phi[idx] + reg.ridge * np.eye(k)
+        phi_rows_t.append(np.ascontiguousarray(phi[idx].T))
+        gram = phi_rows_t[-1] @ phi_rows_t[-1].T + reg.ridge * np.eye(k)
         factors.append(scipy.linalg.cho_factor(gram, check_finite=False))
     next_values = q0.values(t.next_states)
     weights = np.zeros((n_actions, k))
     for _ in range(iterations):
         y = t.rewards + continues * next_values.max(axis=1)
         for a, idx in enumerate(rows):
-            weights[a] = scipy.linalg.cho_solve(factors[a], phi[idx].T @ y[idx], check_finite=False)
+            weights[a] = scipy.linalg.cho_solve(factors[a], phi_rows_t[a] @ y[idx], check_finite=False)
         next_values = phi_next @ weights.T
     return LinearQ(reg.features, weights)
 

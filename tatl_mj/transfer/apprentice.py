@@ -1,0 +1,181 @@
+"""The target apprentice: a control-affine model of the target, learned by least squares.
+
+Paper, eq. ``Apprentice_model``::
+
+    P_hat^(T)(s, a):  s'  =  W_hat phi(s) + B_hat a  =  [W_hat  B_hat] [phi(s); a]
+
+fitted to (s_i, a_i, s_{i+1}) triplets from a random policy (Algorithm 2, step
+"solve the least square linear regression problem"), and grown batch by batch until
+the utility of the projected source policy on the true target and on the apprentice
+agree: ``|U_M(pi) - U_Mhat(pi)| <= zeta`` (Algorithm 2's stopping rule). As the paper
+does, the runner may reuse the alignment samples for it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from typing import Callable
+
+import numpy as np
+
+from tatl_mj.transfer.features import Features, as_states
+from tatl_mj.transitions import Transitions
+
+
+def _as_actions(action_values: np.ndarray, n: int, name: str = "action_values") -> np.ndarray:
+    a = np.asarray(action_values, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.ndim != 2 or len(a) != n:
+        raise ValueError(f"{name} must be (N, m) with N={n}, got shape {np.shape(action_values)}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Apprentice:
+    """``s' = W phi(s) + B a`` (paper eq. ``Apprentice_model``).
+
+    Attributes:
+      W: (d, k) weights of the basis phi (the drift F_hat(s) = W phi(s)).
+      B: (d, m) control matrix B_hat.
+      features: the basis phi, (N, d) -> (N, k).
+    """
+
+    W: np.ndarray
+    B: np.ndarray
+    features: Features
+
+    def __post_init__(self) -> None:
+        w = np.atleast_2d(np.asarray(self.W, dtype=np.float64))
+        b = np.asarray(self.B, dtype=np.float64)
+        b = b[:, None] if b.ndim == 1 else b
+        if b.ndim != 2 or b.shape[0] != w.shape[0]:
+            raise ValueError(f"Apprentice.W (d, k) and B (d, m) need the same d, got {w.shape} and {b.shape}")
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+            raise ValueError("Apprentice.W and B must be finite")
+        object.__setattr__(self, "W", w)
+        object.__setattr__(self, "B", b)
+
+    @property
+    def state_dim(self) -> int:
+        return self.W.shape[0]
+
+    @property
+    def action_dim(self) -> int:
+        return self.B.shape[1]
+
+    def drift(self, states: np.ndarray) -> np.ndarray:
+        """F_hat(s) = W phi(s), (N, d)."""
+        return self.features(as_states(states, dim=self.state_dim)) @ self.W.T
+
+    def predict(self, states: np.ndarray, action_values: np.ndarray) -> np.ndarray:
+        """(N, d) states, (N, m) actions (actuator units) -> (N, d) predicted next states."""
+        s = as_states(states, dim=self.state_dim)
+        a = _as_actions(action_values, len(s))
+        if a.shape[1] != self.action_dim:
+            raise ValueError(f"action_values must have {self.action_dim} columns, got {a.shape[1]}")
+        return self.features(s) @ self.W.T + a @ self.B.T
+
+
+def fit_apprentice(
+    states: np.ndarray,
+    action_values: np.ndarray,
+    next_states: np.ndarray,
+    features: Features,
+    ridge: float = 0.0,
+) -> Apprentice:
+    """Least-squares ``[W B] = argmin sum_i |s_{i+1} - [W B] psi(s_i, a_i)|^2``, psi = [phi(s); a].
+
+    With ``ridge = 0`` the regressors psi must have full column rank (enough samples,
+    the actions must vary, no basis function duplicating an action); otherwise a
+    ValueError says which. ``ridge > 0`` solves the ridge problem instead.
+    """
+    s = as_states(states, "states")
+    s_next = as_states(next_states, "next_states", s.shape[1])
+    if len(s_next) != len(s):
+        raise ValueError(f"next_states has {len(s_next)} rows, states has {len(s)}")
+    a = _as_actions(action_values, len(s))
+    if not (math.isfinite(ridge) and ridge >= 0):
+        raise ValueError(f"ridge must be a finite number >= 0, got {ridge!r}")
+    phi = features(s)
+    psi = np.hstack([phi, a])
+    n, p = psi.shape
+    if ridge == 0:
+        if n < p:
+            raise ValueError(
+                f"too few samples for the apprentice: {n} < {p} unknowns per state coordinate "
+                f"({phi.shape[1]} features + {a.shape[1]} action entries)"
+            )
+        theta, _, rank, sv = np.linalg.lstsq(psi, s_next, rcond=None)
+        if rank < p:
+            hint = "the actions do not vary" if np.linalg.matrix_rank(a - a.mean(axis=0)) < a.shape[1] else (
+                "the features are linearly dependent on these states"
+            )
+            raise ValueError(f"apprentice regressors are rank-deficient (rank {rank} < {p}): {hint}; use ridge > 0 or more varied samples")
+    else:
+        theta = np.linalg.solve(psi.T @ psi + ridge * np.eye(p), psi.T @ s_next)
+    k = phi.shape[1]
+    return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features)
+
+
+def learn_apprentice(
+    transitions: Transitions,
+    action_set: np.ndarray,
+    features: Features,
+    utility_gap: Callable[[Apprentice], float],
+    zeta: float,
+    batch: int,
+    ridge: float = 0.0,
+) -> tuple[Apprentice, int]:
+    """Algorithm 2: fit on the first n = batch, 2 batch, ... samples until |U_M - U_Mhat| <= zeta.
+
+    ``utility_gap(apprentice)`` returns U_M(pi) - U_Mhat(pi) for the projected source
+    policy (the runner computes it; it needs the target simulator). Returns the
+    apprentice and the number of target samples it used. Batches too small for a
+    full-rank fit are skipped. If the rule is never met, the fit on all samples is
+    returned with ``n_used = len(transitions)`` and a RuntimeWarning.
+    """
+    if not isinstance(transitions, Transitions):
+        raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
+    actions = np.asarray(action_set, dtype=np.float64)
+    actions = actions[:, None] if actions.ndim == 1 else actions
+    if actions.ndim != 2 or not np.all(np.isfinite(actions)):
+        raise ValueError(f"action_set must be a finite (n_actions, m) array, got shape {np.shape(action_set)}")
+    if len(transitions) and (transitions.actions.min() < 0 or transitions.actions.max() >= len(actions)):
+        raise ValueError(f"transitions.actions must index action_set (0..{len(actions) - 1})")
+    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
+        raise ValueError(f"batch must be a positive integer, got {batch!r}")
+    if not (math.isfinite(zeta) and zeta >= 0):
+        raise ValueError(f"zeta must be a finite number >= 0, got {zeta!r}")
+    total = len(transitions)
+    if total == 0:
+        raise ValueError("transitions is empty; the apprentice needs samples")
+    sizes = list(range(batch, total, batch)) + [total]
+    last_error: ValueError | None = None
+    apprentice: Apprentice | None = None
+    for n in sizes:
+        part = transitions.head(n)
+        try:
+            apprentice = fit_apprentice(part.states, actions[part.actions], part.next_states, features, ridge)
+        except ValueError as error:  # too few or too uniform samples yet: grow the set
+            last_error = error
+            continue
+        gap = float(utility_gap(apprentice))
+        if not math.isfinite(gap):
+            raise ValueError(f"utility_gap returned {gap} for an apprentice fitted on {n} samples")
+        if abs(gap) <= zeta:
+            return apprentice, n
+    if apprentice is None:
+        raise ValueError(f"no apprentice could be fitted on all {total} samples: {last_error}")
+    warnings.warn(
+        f"apprentice stopping rule |U_M - U_Mhat| <= {zeta} not met with all {total} samples",
+        RuntimeWarning, stacklevel=2,
+    )
+    return apprentice, total
+
+
+__all__ = ["Apprentice", "fit_apprentice", "learn_apprentice"]

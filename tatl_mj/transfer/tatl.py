@@ -1,0 +1,214 @@
+"""The TA-TL policy: Algorithm 1 of the paper, batched over target states.
+
+For each target state s^T_i (paper symbols; eq. numbers refer to the paper's labels):
+
+1. ``s_hat_S  = chi_plus(s_T)``                         project into the source
+2. ``a_S      = argmax_a Q_S(s_hat_S, a)``              greedy source action
+3. ``s_S_next = P_S(s_hat_S, a_S)``                     query the source simulator (one step)
+4. ``s_hat_T_next = chi(s_S_next)``                     project back (eq. ``projected_model``)
+5. ``a_T      = target_actions[a_S]``                   same index (Assumption 1)
+6. ``pi_ad    = s_hat_T_next - P_hat_T(s_T, a_T)``      adaptive term (eq. ``adaptive_term``)
+7. ``a        = a_T + K pi_ad``, ``K = pinv(B_hat)``    TA-TL policy (eq. ``modified_optimal_policy``)
+
+then clipped to the target actuator's ``[target_low, target_high]`` or snapped to the
+nearest admissible action of ``adaptive_actions`` (the paper's A^(T)_ad).
+
+With the apprentice ``P_hat_T(s, a) = W phi(s) + B_hat a`` (eq. ``Apprentice_model``),
+step 7 reads ``a = K (s_hat_T_next - W phi(s_T))``: the action that makes the apprentice
+land on the projected source next state, which is why the target then follows the
+projected source trajectory (eq. ``Source_model_equation``) and why a flipped control
+sign in the target flips the action (the paper's negative-transfer argument).
+
+:class:`DiscreteTATLPolicy` is the same idea for a target whose actions are indices
+(the windy grid world): it picks the target action whose apprentice prediction lands
+nearest ``s_hat_T_next``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import numpy as np
+
+from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.apprentice import Apprentice
+from tatl_mj.transfer.features import as_states
+from tatl_mj.transfer.fqi import QFunction
+
+SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""One batched source-simulator step: (N, dS) states, (N,) action indices -> (N, dS)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TATLStep:
+    """Every quantity of one TA-TL decision, in the paper's symbols (all batched)."""
+
+    s_hat_S: np.ndarray  # (N, dS) chi_plus(s_T)
+    a_S: np.ndarray  # (N,) greedy source action index
+    s_S_next: np.ndarray  # (N, dS) source simulator's next state
+    s_hat_T_next: np.ndarray  # (N, dT) chi(s_S_next), the projected source next state
+    a_T: np.ndarray  # (N, mT) target action of the same index (Assumption 1)
+    pi_ad: np.ndarray  # (N, dT) s_hat_T_next - P_hat_T(s_T, a_T)
+    adaptive: np.ndarray  # (N, mT) K pi_ad
+    action: np.ndarray  # (N, mT) a_T + K pi_ad, clipped or snapped
+
+
+def _as_action_matrix(values: np.ndarray, name: str) -> np.ndarray:
+    a = np.asarray(values, dtype=np.float64)
+    a = a[:, None] if a.ndim == 1 else a
+    if a.ndim != 2 or len(a) == 0 or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be a finite, non-empty (n, m) array, got shape {np.shape(values)}")
+    return a
+
+
+def _source_decision(
+    policy: "TATLPolicy | DiscreteTATLPolicy", target_states: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Steps 1-4 of Algorithm 1: s_T, s_hat_S, a_S, s_S_next, s_hat_T_next."""
+    s_T = as_states(target_states, "target_states", policy.apprentice.state_dim)
+    s_hat_S = policy.mapping.chi_plus(s_T)
+    a_S = np.asarray(policy.source_q.greedy(s_hat_S), dtype=np.int64)
+    s_S_next = np.asarray(policy.source_step(s_hat_S, a_S), dtype=np.float64)
+    if s_S_next.shape != s_hat_S.shape:
+        raise ValueError(f"source_step returned shape {s_S_next.shape}, expected {s_hat_S.shape}")
+    s_hat_T_next = policy.mapping.chi(s_S_next)
+    return s_T, s_hat_S, a_S, s_S_next, s_hat_T_next
+
+
+def _check_common(policy: "TATLPolicy | DiscreteTATLPolicy") -> None:
+    if not isinstance(policy.apprentice, Apprentice):
+        raise ValueError(f"apprentice must be an Apprentice, got {type(policy.apprentice).__name__}")
+    if not callable(policy.source_step):
+        raise ValueError("source_step must be callable (states (N, dS), action indices (N,)) -> (N, dS)")
+    n_s, n_t = len(policy.source_actions), len(policy.target_actions)
+    if n_s != n_t:
+        raise ValueError(
+            f"source_actions ({n_s}) and target_actions ({n_t}) must have the same count (Assumption 1)"
+        )
+    if policy.source_q.n_actions != n_s:
+        raise ValueError(f"source_q has {policy.source_q.n_actions} actions, source_actions has {n_s}")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TATLPolicy:
+    """pi*(T)(s) = pi*(S)(chi(s)) + K pi_ad(s): Algorithm 1 for a continuous-actuator target.
+
+    Attributes:
+      source_q: Q_S, the source task's action values (Phase I).
+      mapping: chi / chi_plus (Phase II).
+      source_step: P_S, one batched step of the source simulator.
+      apprentice: P_hat_T(s, a) = W phi(s) + B_hat a.
+      source_actions: (n, mS) the source's discrete action set.
+      target_actions: (n, mT) the target's; row i corresponds to source row i.
+      target_low, target_high: (mT,) actuator limits the result is clipped to.
+      adaptive_actions: optional (n_ad, mT) admissible set A_ad; when given the
+        action is snapped to its nearest row (after clipping) instead.
+      samples_used: target samples the apprentice used (Algorithm 2), for reports.
+    """
+
+    source_q: QFunction
+    mapping: Mapping
+    source_step: SourceStep
+    apprentice: Apprentice
+    source_actions: np.ndarray
+    target_actions: np.ndarray
+    target_low: np.ndarray
+    target_high: np.ndarray
+    adaptive_actions: np.ndarray | None = None
+    samples_used: int | None = None
+    K: np.ndarray = dataclasses.field(init=False, repr=False)  # pinv(B_hat), the mixture gain
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "source_actions", _as_action_matrix(self.source_actions, "source_actions"))
+        target = _as_action_matrix(self.target_actions, "target_actions")
+        object.__setattr__(self, "target_actions", target)
+        _check_common(self)
+        m = target.shape[1]
+        if self.apprentice.action_dim != m:
+            raise ValueError(f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {m}")
+        low = np.broadcast_to(np.asarray(self.target_low, dtype=np.float64), (m,)).copy()
+        high = np.broadcast_to(np.asarray(self.target_high, dtype=np.float64), (m,)).copy()
+        if np.any(np.isnan(low)) or np.any(np.isnan(high)) or np.any(low > high):
+            raise ValueError(f"target_low must be <= target_high, got {low} and {high}")
+        object.__setattr__(self, "target_low", low)
+        object.__setattr__(self, "target_high", high)
+        if self.adaptive_actions is not None:
+            ad = _as_action_matrix(self.adaptive_actions, "adaptive_actions")
+            if ad.shape[1] != m or np.any(ad < low) or np.any(ad > high):
+                raise ValueError(f"adaptive_actions must be (n_ad, {m}) rows within [target_low, target_high]")
+            object.__setattr__(self, "adaptive_actions", ad)
+        if np.linalg.matrix_rank(self.apprentice.B) < m:
+            raise ValueError(
+                f"apprentice.B_hat has rank {np.linalg.matrix_rank(self.apprentice.B)} < {m}: "
+                "the target's actions have no identified effect, K = pinv(B_hat) is meaningless"
+            )
+        object.__setattr__(self, "K", np.linalg.pinv(self.apprentice.B))
+
+    def step(self, target_states: np.ndarray) -> TATLStep:
+        """Runs Algorithm 1 on (N, dT) target states and returns every intermediate."""
+        s_T, s_hat_S, a_S, s_S_next, s_hat_T_next = _source_decision(self, target_states)
+        a_T = self.target_actions[a_S]
+        pi_ad = s_hat_T_next - self.apprentice.predict(s_T, a_T)
+        adaptive = pi_ad @ self.K.T
+        action = np.clip(a_T + adaptive, self.target_low, self.target_high)
+        if self.adaptive_actions is not None:
+            gaps = np.linalg.norm(action[:, None, :] - self.adaptive_actions[None, :, :], axis=2)
+            action = self.adaptive_actions[np.argmin(gaps, axis=1)]
+        return TATLStep(s_hat_S, a_S, s_S_next, s_hat_T_next, a_T, pi_ad, adaptive, action)
+
+    def __call__(self, target_states: np.ndarray) -> np.ndarray:
+        """(N, dT) target states -> (N, mT) target action values."""
+        return self.step(target_states).action
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class DiscreteTATLPolicy:
+    """Algorithm 1 for a target whose actions are indices (no continuous actuator).
+
+    ``target_actions`` (n, mT) are the action values the apprentice was fitted with
+    (e.g. a grid move's [d_row, d_col]); the policy returns the index i whose
+    prediction ``P_hat_T(s_T, target_actions[i])`` is nearest ``s_hat_T_next``; ties go
+    to the source's own index a_S. ``target_low``/``target_high``/``adaptive_actions``
+    are accepted for a uniform signature and unused.
+    """
+
+    source_q: QFunction
+    mapping: Mapping
+    source_step: SourceStep
+    apprentice: Apprentice
+    source_actions: np.ndarray
+    target_actions: np.ndarray
+    target_low: np.ndarray | None = None
+    target_high: np.ndarray | None = None
+    adaptive_actions: np.ndarray | None = None
+    samples_used: int | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "source_actions", _as_action_matrix(self.source_actions, "source_actions"))
+        target = _as_action_matrix(self.target_actions, "target_actions")
+        object.__setattr__(self, "target_actions", target)
+        _check_common(self)
+        if self.apprentice.action_dim != target.shape[1]:
+            raise ValueError(
+                f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {target.shape[1]}"
+            )
+
+    def distances(self, target_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, n) |P_hat_T(s_T, a_i) - s_hat_T_next| for every target action, and a_S."""
+        s_T, _, a_S, _, s_hat_T_next = _source_decision(self, target_states)
+        n, n_actions = len(s_T), len(self.target_actions)
+        drift = self.apprentice.drift(s_T)  # (N, d)
+        predictions = drift[:, None, :] + (self.target_actions @ self.apprentice.B.T)[None, :, :]
+        return np.linalg.norm(predictions - s_hat_T_next[:, None, :], axis=2).reshape(n, n_actions), a_S
+
+    def __call__(self, target_states: np.ndarray) -> np.ndarray:
+        """(N, dT) target states -> (N,) int64 target action indices."""
+        dist, a_S = self.distances(target_states)
+        best = dist.min(axis=1, keepdims=True)
+        near = dist <= best + 1e-9 * (1.0 + best)
+        rows = np.arange(len(dist))
+        return np.where(near[rows, a_S], a_S, np.argmax(near, axis=1)).astype(np.int64)
+
+
+__all__ = ["DiscreteTATLPolicy", "SourceStep", "TATLPolicy", "TATLStep"]
