@@ -1,0 +1,185 @@
+"""Conformance of every task in ``suite.ALL_TASKS``: dm_env and gymnasium contracts,
+seeding, rendering, argument checking and divergence handling.
+
+Episodes are kept short (``time_limit`` in task_kwargs) so the file stays fast.
+"""
+
+import inspect
+
+import dm_env
+import numpy as np
+import pytest
+from absl.testing import absltest
+from dm_control.rl import control
+from dm_env import test_utils
+
+from tatl_mj import suite
+
+SHORT_TIME_LIMIT_S = 0.3  # physics tasks, seconds
+SHORT_TIME_LIMIT_STEPS = 12  # gridworld, steps
+N_ACTIONS_IN_SEQUENCE = 40  # crosses at least one episode end with the limits above
+
+
+def _accepts(domain, task, name):
+    return name in inspect.signature(suite.DOMAINS[domain].TASKS[task]).parameters
+
+
+def _load(domain, task, seed=0, **extra):
+    kwargs = {"random": seed, **extra}
+    if _accepts(domain, task, "time_limit"):
+        kwargs["time_limit"] = SHORT_TIME_LIMIT_STEPS if domain == "gridworld" else SHORT_TIME_LIMIT_S
+    return suite.load(domain, task, task_kwargs=kwargs)
+
+
+def _is_physics(env):
+    return isinstance(env, control.Environment)
+
+
+def _action_cycle(domain, n):
+    actions = suite.action_set(domain)
+    return [actions[i % len(actions)] for i in range(n)]
+
+
+TASK_IDS = [f"{d}-{t}" for d, t in suite.ALL_TASKS]
+PHYSICS_TASKS = [(d, t) for d, t in suite.ALL_TASKS if d != "gridworld"]
+PHYSICS_IDS = [f"{d}-{t}" for d, t in PHYSICS_TASKS]
+
+
+def test_suite_lists_every_domain_and_task():
+    assert set(suite.DOMAINS) == {"cartpole", "pendulum", "mountain_car", "bicycle", "gridworld"}
+    assert all(suite.DOMAINS[d].TASKS for d in suite.DOMAINS), "a domain has no tasks"
+    assert len(suite.ALL_TASKS) == len(set(suite.ALL_TASKS))
+
+
+# --- dm_env conformance: one generated TestCase per task -----------------------
+
+def _dm_env_case(domain, task):
+    class Case(test_utils.EnvironmentTestMixin, absltest.TestCase):
+        def make_object_under_test(self):
+            return _load(domain, task)
+
+        def make_action_sequence(self):
+            yield from _action_cycle(domain, N_ACTIONS_IN_SEQUENCE)
+
+        def test_reaches_an_episode_end(self):
+            self.environment.reset()
+            steps = [self.environment.step(a) for a in _action_cycle(domain, N_ACTIONS_IN_SEQUENCE)]
+            self.assertTrue(any(s.last() for s in steps))
+
+    name = f"TestDmEnv_{domain}_{task}"
+    Case.__name__ = Case.__qualname__ = name
+    return name, Case
+
+
+for _domain, _task in suite.ALL_TASKS:
+    _name, _case = _dm_env_case(_domain, _task)
+    globals()[_name] = _case
+del _domain, _task, _name, _case
+
+
+# --- gymnasium through shimmy -----------------------------------------------------
+
+@pytest.mark.filterwarnings("ignore:.*(Box observation space|symmetric and normalized).*:UserWarning")
+@pytest.mark.parametrize("domain, task", suite.ALL_TASKS, ids=TASK_IDS)
+def test_gymnasium_check_env(domain, task):
+    if domain == "gridworld":
+        pytest.skip("gridworld is a plain dm_env.Environment, not a dm_control one; shimmy's "
+                    "DmControlCompatibilityV0 needs dm_control's physics and task")
+    from gymnasium.utils.env_checker import check_env
+    from shimmy import DmControlCompatibilityV0
+
+    env = DmControlCompatibilityV0(_load(domain, task))
+    check_env(env, skip_render_check=True)
+    env.close()
+
+
+# --- seeding --------------------------------------------------------------------
+
+def _trace(domain, task, seed, n=25):
+    extra = {"random_start": True} if _accepts(domain, task, "random_start") else {}
+    env = _load(domain, task, seed=seed, **extra)
+    timestep = env.reset()
+    states, rewards = [timestep.observation["state"].copy()], []
+    for action in _action_cycle(domain, n):
+        timestep = env.step(action)
+        states.append(timestep.observation["state"].copy())
+        rewards.append(timestep.reward)
+    return np.array(states), np.array(rewards, dtype=float)
+
+
+@pytest.mark.parametrize("domain, task", suite.ALL_TASKS, ids=TASK_IDS)
+def test_same_seed_same_run_and_seeds_differ_at_start(domain, task):
+    states_a, rewards_a = _trace(domain, task, seed=11)
+    states_b, rewards_b = _trace(domain, task, seed=11)
+    np.testing.assert_array_equal(states_a, states_b)
+    np.testing.assert_array_equal(rewards_a, rewards_b)
+    assert np.all(np.isfinite(states_a))
+    starts = {tuple(_trace(domain, task, seed=s, n=0)[0][0]) for s in range(4)}
+    assert len(starts) > 1, "different seeds gave the same start state"
+
+
+# --- rendering ------------------------------------------------------------------
+
+@pytest.mark.parametrize("domain, task", PHYSICS_TASKS, ids=PHYSICS_IDS)
+def test_renders_a_frame_from_the_tracking_camera(domain, task):
+    env = _load(domain, task)
+    env.reset()
+    env.step(suite.action_set(domain)[-1])
+    frame = env.physics.render(height=480, width=640, camera_id="tracking")
+    assert frame.shape == (480, 640, 3) and frame.dtype == np.uint8
+    colours = np.unique(frame.reshape(-1, 3), axis=0)
+    assert frame.std() > 10 and len(colours) > 50, "blank or nearly uniform frame"
+
+
+# --- argument checking ------------------------------------------------------------
+
+def test_load_rejects_unknown_names_listing_the_valid_ones():
+    with pytest.raises(ValueError, match="valid domains.*cartpole"):
+        suite.load("acrobot", "swingup")
+    with pytest.raises(ValueError, match="valid tasks.*climb"):
+        suite.load("mountain_car", "descend")
+    with pytest.raises(ValueError, match="unknown task_kwargs.*'colour'.*valid.*random"):
+        suite.load("gridworld", "windy", task_kwargs={"colour": "red"})
+    with pytest.raises(ValueError, match="unknown task_kwargs.*'colour'.*valid.*time_limit"):
+        suite.load("mountain_car", "climb", task_kwargs={"colour": "red"})
+
+
+@pytest.mark.parametrize("domain", sorted(suite.DOMAINS))
+def test_discrete_action_maps_indices_and_rejects_bad_ones(domain):
+    actions = suite.action_set(domain)
+    assert len(actions) >= 2
+    for i, expected in enumerate(actions):
+        np.testing.assert_array_equal(suite.discrete_action(domain, i), expected)
+    for bad in (-1, len(actions)):
+        with pytest.raises(ValueError, match="out of range"):
+            suite.discrete_action(domain, bad)
+    task = next(iter(suite.DOMAINS[domain].TASKS))
+    env = _load(domain, task)
+    env.reset()
+    for action in actions:  # every discrete action is a valid env action
+        env.action_spec().validate(np.asarray(action, dtype=env.action_spec().dtype))
+        env.step(action)
+
+
+def test_discrete_action_values():
+    np.testing.assert_array_equal(suite.discrete_action("mountain_car", 0), [-1.0])
+    np.testing.assert_array_equal(suite.discrete_action("mountain_car", 2), [1.0])
+    assert suite.discrete_action("gridworld", 3) == 3
+
+
+# --- divergence -------------------------------------------------------------------
+
+@pytest.mark.parametrize("domain, task", PHYSICS_TASKS, ids=PHYSICS_IDS)
+def test_divergence_ends_the_episode_cleanly(domain, task):
+    env = _load(domain, task)
+    first = env.reset()
+    # Far above MuJoCo's mjMAXVAL (1e10): the step raises mjWARN_BADQVEL.
+    env.physics.data.qvel[:] = 1e12
+    timestep = env.step(suite.action_set(domain)[0])
+    assert timestep.last() and timestep.discount == 0.0 and timestep.reward == 0.0
+    assert np.all(np.isfinite(timestep.observation["state"]))
+    np.testing.assert_array_equal(timestep.observation["state"], first.observation["state"])
+    assert isinstance(env.diverged, str) and "mjWARN_BADQVEL" in env.diverged
+    after = env.step(suite.action_set(domain)[0])
+    assert after.step_type is dm_env.StepType.FIRST and env.diverged is None
+    assert np.all(np.isfinite(after.observation["state"]))
