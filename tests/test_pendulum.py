@@ -227,7 +227,7 @@ def test_bad_edits_and_options_raise():
 
 
 def test_actions_spec_and_rollout_flags():
-    np.testing.assert_array_equal(pendulum.ACTIONS, [[-2.0], [0.0], [2.0]])
+    np.testing.assert_array_equal(pendulum.ACTIONS, [[-4.0], [0.0], [4.0]])
     for task in pendulum.TASKS:
         env = suite.load("pendulum", task)
         assert env.control_timestep() == pytest.approx(0.05)

@@ -22,6 +22,7 @@ import zlib
 from functools import partial
 from typing import Any, Callable
 
+import dm_env
 import numpy as np
 
 from tatl_mj import sampling, suite
@@ -97,8 +98,8 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
         from tatl_mj.suite import gridworld
 
         windy = spec.source.task == "windy"
-        next_state, reward, absorbing, _cells = gridworld.transition_model(windy=windy)
-        return fqi.q_iteration(next_state, reward, absorbing, learner.gamma), 0
+        next_state, reward, absorbing, cells = gridworld.transition_model(windy=windy)
+        return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.name, "source-data"))
     regressor = fqi.make_regressor(
         {"kind": learner.regressor, "features": learner.features, "seed": derive_seed(seed, spec.name, "source-fqi")},
@@ -148,22 +149,34 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 
 # --- phase III ----------------------------------------------------------------
 
+def _action_values(domain: str) -> np.ndarray:
+    """Action values as the learners see them: actuator values, or grid moves."""
+    if domain == "gridworld":
+        from tatl_mj.suite import gridworld
+
+        return gridworld.MOVES.astype(np.float64)
+    return np.asarray(suite.action_set(domain), dtype=np.float64)
+
+
 def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int) -> "method.TransferProblem":
     """The bundle a transfer method learns from (see ``tatl_mj.transfer.method``)."""
     source, target = spec.source, spec.target
     env = suite.load(target.domain, target.task, task_kwargs=target.task_kwargs)
     action_spec = env.action_spec()
-    discrete = not hasattr(action_spec, "minimum") or target.domain == "gridworld"
+    # A discrete target (the grid world) takes action indices; its apprentice
+    # sees the moves [d_row, d_col] as action values.
+    discrete = isinstance(action_spec, dm_env.specs.DiscreteArray)
     low = None if discrete else np.asarray(action_spec.minimum, dtype=np.float64)
     high = None if discrete else np.asarray(action_spec.maximum, dtype=np.float64)
+    target_actions = _action_values(target.domain)
     state_dim = artifacts.target_stream.state_dim
     learner = spec.target_learning
     return method.TransferProblem(
         source_q=artifacts.source_q,
         mapping=artifacts.mapping,
         source_step=partial(sampling.step_from, source.domain, source.task, task_kwargs=source.task_kwargs),
-        source_actions=suite.action_set(source.domain),
-        target_actions=suite.action_set(target.domain),
+        source_actions=_action_values(source.domain),
+        target_actions=target_actions,
         target_low=low,
         target_high=high,
         target_discrete=discrete,
@@ -177,6 +190,58 @@ def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int
     )
 
 
+def projected_source_policy(problem: "method.TransferProblem") -> Callable[[np.ndarray], np.ndarray]:
+    """pi_hat(s_T) = pi*_S(chi_plus(s_T)) carried to the target's action of the same index (Algorithm 2)."""
+    actions = np.asarray(problem.target_actions, dtype=np.float64).reshape(len(problem.target_actions), -1)
+
+    def policy(states: np.ndarray) -> np.ndarray:
+        index = problem.source_q.greedy(problem.mapping.chi_plus(states))
+        return index if problem.target_discrete else actions[index]
+
+    return policy
+
+
+def utility_gap(spec: ExperimentSpec, preset: Preset, problem: "method.TransferProblem", seed: int):
+    """Algorithm 2's |U_M(pi) - U_Mhat(pi)| / |U_M(pi)| for the projected source policy, or None.
+
+    U_M is the projected policy's average return on the real target, U_Mhat the
+    same policy's return when the apprentice stands in for the target (the
+    target task's own reward and end conditions applied to the apprentice's
+    predicted states, from the same kind of start states). The gap is relative,
+    so ``apprentice.zeta`` is a fraction. The grid world has no vectorised
+    reward model, so Algorithm 2 is not run there (None): TA-TL then fits its
+    apprentice on the whole budget.
+    """
+    target = spec.target
+    kwargs = {**target.task_kwargs, "random": derive_seed(seed, spec.name, "algorithm2-starts")}
+    env = suite.load(target.domain, target.task, task_kwargs=kwargs)
+    task = getattr(env, "task", None)
+    if not hasattr(task, "batch_reward"):
+        return None
+    starts = np.stack([env.reset().observation["state"] for _ in range(preset.evaluation_episodes)])
+    projected = projected_source_policy(problem)
+    u_true = float(np.mean(evaluate(spec, preset, projected, derive_seed(seed, spec.name, "evaluation"))[0]))
+    actions = np.asarray(problem.target_actions, dtype=np.float64).reshape(len(problem.target_actions), -1)
+
+    def gap(apprentice_model) -> float:
+        states, total = starts.copy(), np.zeros(len(starts))
+        alive = np.ones(len(starts), dtype=bool)
+        with np.errstate(all="ignore"):
+            for _ in range(preset.evaluation_steps):
+                action = projected(states)
+                states = apprentice_model.predict(states, action if action.ndim == 2 else actions[action])
+                if not np.all(np.isfinite(states)):
+                    return 1e300  # the apprentice diverged: as far from the target as can be
+                total += np.where(alive, task.batch_reward(states), 0.0)
+                alive &= ~np.asarray(task.batch_absorbing(states), dtype=bool)
+                if not alive.any():
+                    break
+        u_hat = float(total.mean())
+        return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
+
+    return gap
+
+
 def run_method(
     spec: ExperimentSpec, preset: Preset, seed: int, method_name: str, artifacts: SourceArtifacts,
     methods: dict | None = None,
@@ -187,6 +252,12 @@ def run_method(
         raise ValueError(f"unknown method {method_name!r}; valid methods: {sorted(methods)}")
     transfer = methods[method_name]
     problem = transfer_problem(spec, artifacts, seed)
+    if method_name == "ta-tl":
+        gap = utility_gap(spec, preset, problem, seed)
+        if gap is not None:
+            problem = dataclasses.replace(
+                problem, utility_gap=gap, zeta=spec.apprentice.zeta, apprentice_batch=preset.target_budgets[0],
+            )
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
     curve = []
     for budget in preset.target_budgets:
@@ -197,6 +268,8 @@ def run_method(
         returns, lengths = evaluate(spec, preset, policy, eval_seed)
         curve.append({
             "samples": int(budget),
+            # Algorithm 2 may stop before the budget; the curve still counts the budget.
+            "samples_used": int(getattr(policy, "samples_used", None) or budget),
             "mean_return": float(np.mean(returns)),
             "returns": [float(r) for r in returns],
             "mean_steps": float(np.mean(lengths)),
@@ -211,4 +284,5 @@ def run_method(
         "final_return": curve[-1]["mean_return"],
         "random_return": artifacts.random_return,
         "mapping_target_samples": artifacts.mapping_target_samples,
+        "algorithm2_samples": curve[-1]["samples_used"] if method_name == "ta-tl" else None,
     }

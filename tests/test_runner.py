@@ -1,0 +1,122 @@
+"""The batch runner: results shape, resume after a kill, failure isolation, Ray = local."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from tatl_mj.experiments import records, runner, spec as spec_mod
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = {"source_samples": 400, "alignment_samples": 40, "target_budgets": [40, 120],
+        "evaluation_episodes": 2, "evaluation_steps": 40}
+
+
+def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs) -> spec_mod.ExperimentSpec:
+    table = tomllib.loads((ROOT / "tasks" / f"{name}.toml").read_text())
+    table["presets"] = {"tiny": TINY}
+    table["source_learning"]["iterations"] = 5
+    table["target_learning"]["iterations"] = 5
+    if target_kwargs:
+        table["target"]["task_kwargs"] = target_kwargs
+        table["name"] = name + "_broken"
+    return spec_mod.parse_spec(table, f"{name}.toml")
+
+
+def write_tiny(path: Path, name: str = "ip_to_flipped_ip") -> Path:
+    text = (ROOT / "tasks" / f"{name}.toml").read_text().split("[presets.smoke]")[0]
+    text += "[presets.tiny]\n" + "\n".join(f"{k} = {json.dumps(v)}" for k, v in TINY.items()) + "\n"
+    out = path / f"{name}.toml"
+    out.write_text(text)
+    return out
+
+
+def test_local_run_writes_records_and_summary(tmp_path):
+    spec = tiny_spec()
+    summary = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
+    exp = summary["experiments"]["ip_to_flipped_ip"]
+    assert set(exp["methods"]) == {"ta-tl", "uma-tl", "rl"}
+    for method in exp["methods"].values():
+        assert method["curve"]["samples"] == [40, 120]
+        assert len(method["final_return"]) == len(method["samples_to_threshold"]) == 1
+    assert exp["threshold"] is not None and exp["random_return"] is not None
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"] == \
+        exp["methods"]["rl"]["final_return"]
+    assert not list(tmp_path.rglob("*.tmp"))
+
+    # A rerun of the same command does no work and changes no record.
+    stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "records").rglob("*.json")}
+    again = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+    assert again["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"] == \
+        exp["methods"]["rl"]["final_return"]
+
+
+def test_mixing_presets_in_one_folder_is_refused(tmp_path):
+    records.write_json(tmp_path / "run.json", {"preset": "paper", "experiments": []})
+    with pytest.raises(SystemExit, match="preset 'paper'"):
+        runner.run([tiny_spec()], "tiny", [0], tmp_path, workers=1, progress=False)
+
+
+def test_a_failing_experiment_does_not_take_the_others_down(tmp_path):
+    good, bad = tiny_spec(), tiny_spec(no_such_option=1)
+    summary = runner.run([good, bad], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
+    assert summary["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"]
+    assert any("ip_to_flipped_ip_broken" in f for f in summary["failures"])
+    failure = (tmp_path / "failures" / "ip_to_flipped_ip_broken__seed0__source.txt").read_text()
+    assert "no_such_option" in failure
+
+
+def test_killed_run_resumes_without_losing_finished_units(tmp_path):
+    spec_path = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "tatl_mj.cli", "run", str(spec_path), "--preset", "tiny", "--seeds", "2",
+           "--workers", "1", "--out", str(out)]
+    env = {**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 240
+    while time.time() < deadline and len(list((out / "records").rglob("*.json"))) < 2:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = {p: p.stat().st_mtime_ns for p in (out / "records").rglob("*.json")}
+    assert len(finished) >= 2, "the run should have finished some units before the kill"
+    assert not (out / "summary.json").exists()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    for path, stamp in finished.items():
+        assert path.stat().st_mtime_ns == stamp, f"{path} was recomputed"
+    summary = json.loads((out / "summary.json").read_text())
+    for method in summary["experiments"]["ip_to_flipped_ip"]["methods"].values():
+        assert method["seeds"] == [0, 1]
+
+
+def test_atomic_write_keeps_the_old_file_on_failure(tmp_path, monkeypatch):
+    path = tmp_path / "record.json"
+    records.write_json(path, {"ok": 1})
+
+    def boom(*args):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        records.write_json(path, {"ok": 2})
+    assert json.loads(path.read_text()) == {"ok": 1}
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_ray_executor_matches_local(tmp_path):
+    pytest.importorskip("ray", reason="Ray is the optional extra tatl-mj[ray]")
+    spec = tiny_spec()
+    local = runner.run([spec], "tiny", [0], tmp_path / "local", workers=1, progress=False)
+    distributed = runner.run([spec], "tiny", [0], tmp_path / "ray", workers=2, executor="ray", progress=False)
+    for name, method in local["experiments"]["ip_to_flipped_ip"]["methods"].items():
+        other = distributed["experiments"]["ip_to_flipped_ip"]["methods"][name]
+        assert other["curve"]["mean_return"] == method["curve"]["mean_return"]

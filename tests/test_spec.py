@@ -1,0 +1,83 @@
+"""Experiment specs: the five shipped specs load; malformed ones name file, key and expectation."""
+
+import copy
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from tatl_mj.experiments import spec as spec_mod
+
+TASKS = sorted((Path(__file__).resolve().parents[1] / "tasks").glob("*.toml"))
+EXPECTED = {"grid_to_windy", "ip_to_timevarying_ip", "cartpole_to_bicycle", "mc_to_ip", "ip_to_flipped_ip"}
+
+
+def test_the_five_paper_experiments_ship():
+    assert {p.stem for p in TASKS} == EXPECTED
+
+
+@pytest.mark.parametrize("path", TASKS, ids=lambda p: p.stem)
+def test_shipped_spec_loads_with_smoke_and_paper_presets(path):
+    spec = spec_mod.load_spec(path)
+    assert spec.name == path.stem
+    for name in ("smoke", "paper"):
+        preset = spec.preset(name)
+        assert list(preset.target_budgets) == sorted(preset.target_budgets)
+    assert max(spec.preset("paper").target_budgets) > max(spec.preset("smoke").target_budgets)
+
+
+def _base() -> dict:
+    return tomllib.loads((TASKS[0].parent / "ip_to_flipped_ip.toml").read_text())
+
+
+def _error(table: dict) -> str:
+    with pytest.raises(spec_mod.SpecError) as info:
+        spec_mod.parse_spec(table, "bad.toml")
+    return str(info.value)
+
+
+def test_unknown_key_is_named_with_valid_keys():
+    table = _base()
+    table["mapping"]["neighbours"] = 3
+    message = _error(table)
+    assert "bad.toml" in message and "mapping.neighbours" in message and "n_neighbors" in message
+
+
+def test_wrong_type_is_named():
+    table = _base()
+    table["source_learning"]["gamma"] = "high"
+    message = _error(table)
+    assert "source_learning.gamma" in message and "finite number" in message
+
+
+@pytest.mark.parametrize(
+    "edit, needle",
+    [
+        (lambda t: t["source"].__setitem__("domain", "unicycle"), "valid domains"),
+        (lambda t: t["target"].__setitem__("task", "fly"), "valid tasks"),
+        (lambda t: t["mapping"].__setitem__("kind", "magic"), "valid choices"),
+        (lambda t: t["source_learning"].__setitem__("gamma", 1.5), "source_learning.gamma"),
+        (lambda t: t["presets"]["smoke"].__setitem__("target_budgets", [400, 100]), "strictly increasing"),
+        (lambda t: t["presets"]["smoke"].__setitem__("evaluation_episodes", 0), "evaluation_episodes"),
+        (lambda t: t["presets"]["smoke"].pop("source_samples"), "missing required key"),
+        (lambda t: t.pop("presets"), "presets"),
+        (lambda t: t["source"]["data"].__setitem__("state_high", [-5.0, -9.0]), "low < high"),
+    ],
+)
+def test_impossible_values_are_named(edit, needle):
+    table = copy.deepcopy(_base())
+    edit(table)
+    assert needle in _error(table)
+
+
+def test_unknown_preset_lists_valid_ones(tmp_path):
+    spec = spec_mod.load_spec(TASKS[0])
+    with pytest.raises(spec_mod.SpecError, match="valid presets"):
+        spec.preset("huge")
+
+
+def test_invalid_toml_names_the_file(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("name = \n")
+    with pytest.raises(spec_mod.SpecError, match="broken.toml.*not valid TOML"):
+        spec_mod.load_spec(path)
