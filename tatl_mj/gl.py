@@ -75,6 +75,10 @@ class GLBackendError(RuntimeError):
     """No usable OpenGL backend; the message says what was tried and how to fix it."""
 
 
+class UnknownBackendError(GLBackendError, ValueError):
+    """``MUJOCO_GL`` names no backend; a ValueError that a GLBackendError handler also catches."""
+
+
 def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
     """Chooses the GL backend, sets ``MUJOCO_GL`` and ``PYOPENGL_PLATFORM``; returns its name.
 
@@ -82,13 +86,14 @@ def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
     is honoured (and checked to work); otherwise EGL is tried, then OSMesa.
 
     Raises:
-      ValueError: ``MUJOCO_GL`` names no backend tatl-mj can render with.
+      UnknownBackendError: ``MUJOCO_GL`` names no backend tatl-mj can render
+        with (both a ValueError and a GLBackendError).
       GLBackendError: no backend works (the message names what was tried, the
         errors and the fix), or mujoco was already imported with another backend.
     """
     requested = environ.get("MUJOCO_GL", "").strip().lower()
     if requested and requested not in BACKENDS:
-        raise ValueError(
+        raise UnknownBackendError(
             f"MUJOCO_GL={environ['MUJOCO_GL']!r} is not a rendering backend; "
             f"valid choices: {', '.join(BACKENDS)} (or unset it to choose automatically)"
         )

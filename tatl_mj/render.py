@@ -47,6 +47,8 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from tatl_mj.suite import gridworld
+
 Policy = Callable[[np.ndarray], np.ndarray]
 SourceSpec = tuple[Any, Callable[[np.ndarray], np.ndarray]]
 
@@ -127,12 +129,12 @@ def iter_frames(
 
     step_seconds = _step_seconds(env)
     with contextlib.ExitStack() as stack:
-        paint = _painter(env, width, height, camera, stack)
-        paint_source = None
+        paint, _ = _painter(env, width, height, camera, stack)
+        show_source = None
         if source is not None:
             source_env, source_state_fn = source
             source_env.reset()
-            paint_source = _painter(source_env, width, height, camera, stack)
+            _, show_source = _painter(source_env, width, height, camera, stack)
         target_name = _domain_name(env)
         source_name = None if source is None else _domain_name(source[0])
 
@@ -158,7 +160,10 @@ def iter_frames(
                         episode_steps, episode_return, ended = 0, 0.0, ""
 
             state = _state(timestep)
-            text = f"t {episode_steps * step_seconds:5.2f} s"
+            if hasattr(env, "physics"):
+                text = f"t {episode_steps * step_seconds:5.2f} s"
+            else:
+                text = f"step {episode_steps:3d}"
             if method_label:
                 text += f"   {method_label}"
             text += f"   return {episode_return:.1f}"
@@ -168,10 +173,9 @@ def iter_frames(
                 text += f"   [{ended}]"
             image = _label(paint(), text, "top")
             image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
-            if paint_source is not None:
+            if show_source is not None:
                 mapped = np.asarray(source_state_fn(state), dtype=np.float64).reshape(-1)
-                _set_state(source_env, mapped)
-                right = _label(paint_source(), f"source: {source_name} (mapped state)", "bottom")
+                right = _label(show_source(mapped), f"source: {source_name} (mapped state)", "bottom")
                 right[:, :2] = 40  # a thin divider between the panels
                 image = np.concatenate([image, right], axis=1)
             if ended:
@@ -203,28 +207,44 @@ def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps:
         imageio_v3.imwrite(path, np.stack(stack), extension=".gif", duration=1000.0 / fps, loop=0)
         return path
     count = 0
-    with imageio_v2.get_writer(
-        path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-        pixelformat="yuv420p", macro_block_size=2, quality=5,
-    ) as writer:
-        for frame in checked:
-            pad = ((0, frame.shape[0] % 2), (0, frame.shape[1] % 2), (0, 0))
-            writer.append_data(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame)
-            count += 1
-    if count == 0:
-        path.unlink(missing_ok=True)
-        raise ValueError("frames is empty: a clip needs at least one frame")
+    try:
+        with imageio_v2.get_writer(
+            path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+            pixelformat="yuv420p", macro_block_size=2, quality=5,
+        ) as writer:
+            for frame in checked:
+                pad = ((0, frame.shape[0] % 2), (0, frame.shape[1] % 2), (0, 0))
+                writer.append_data(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame)
+                count += 1
+        if count == 0:
+            raise ValueError("frames is empty: a clip needs at least one frame")
+    except BaseException:
+        path.unlink(missing_ok=True)  # no half-written clip left behind
+        raise
     return path
 
 
 # --- Painters -----------------------------------------------------------------
 
+Painter = Callable[[], np.ndarray]
+StatePainter = Callable[[np.ndarray], np.ndarray]
+
+
 def _painter(env: Any, width: int, height: int, camera: str,
-             stack: contextlib.ExitStack) -> Callable[[], np.ndarray]:
-    """A function drawing ``env``'s current state as an (height, width, 3) uint8 image."""
+             stack: contextlib.ExitStack) -> tuple[Painter, StatePainter]:
+    """Two functions drawing ``env`` as a fresh (height, width, 3) uint8 image.
+
+    ``paint()`` draws the current state; ``show(state)`` draws ``state`` (for a
+    MuJoCo env it puts the simulator in that state first).
+    """
+    if isinstance(env, gridworld.GridWorld):
+        return _grid_painters(env, width, height)
     physics = getattr(env, "physics", None)
     if physics is None:
-        return _grid_painter(env, width, height)
+        raise ValueError(
+            f"env must be a tatl-mj task (a MuJoCo environment or the grid world), "
+            f"got {type(env).__name__}"
+        )
     model = physics.model
     camera_id = mujoco.mj_name2id(model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, camera)
     if camera_id < 0:
@@ -249,27 +269,77 @@ def _painter(env: Any, width: int, height: int, camera: str,
         renderer.update_scene(physics.data.ptr, camera=camera_id)
         return renderer.render()
 
-    return paint
+    def show(state: np.ndarray) -> np.ndarray:
+        physics.set_state_vector(state)
+        return paint()
+
+    return paint, show
 
 
-def _grid_painter(env: Any, width: int, height: int) -> Callable[[], np.ndarray]:
-    raise NotImplementedError("grid world drawing lands with the grid world")
+def _grid_painters(env: gridworld.GridWorld, width: int, height: int) -> tuple[Painter, StatePainter]:
+    """Draws the grid: free cells, obstacles, the wind band (windy task), start, goal, agent."""
+    rows, cols = gridworld.N_ROWS, gridworld.N_COLS
+    band = max(11, round(height / 30)) + 2 * max(4, round(height / 90)) + 4  # label strips
+    cell = max(2, min((width - 8) // cols, (height - 2 * band) // rows))
+    x0, y0 = (width - cell * cols) // 2, (height - cell * rows) // 2
+    canvas = Image.new("RGB", (width, height), (46, 56, 72))
+    draw = ImageDraw.Draw(canvas)
+    wind = gridworld.WIND if env.windy else np.zeros(cols, dtype=int)
+    font = _font(max(9, cell // 2))
+
+    def box(row: int, col: int, inset: int = 0) -> tuple[int, int, int, int]:
+        return (x0 + col * cell + inset, y0 + row * cell + inset,
+                x0 + (col + 1) * cell - 1 - inset, y0 + (row + 1) * cell - 1 - inset)
+
+    for row in range(rows):
+        for col in range(cols):
+            if gridworld.OBSTACLES[row, col]:
+                fill = (70, 70, 78)
+            elif wind[col] > 0:
+                fill = (205, 225, 250) if wind[col] == 1 else (160, 195, 240)
+            else:
+                fill = (236, 236, 232)
+            draw.rectangle(box(row, col), fill=fill, outline=(150, 150, 150))
+            if wind[col] > 0 and not gridworld.OBSTACLES[row, col]:
+                # One small up-chevron per cell of push, so the strength reads at a glance.
+                cx = x0 + col * cell + cell // 2
+                for i in range(int(wind[col])):
+                    cy = y0 + row * cell + cell // 4 + i * cell // 4
+                    half = max(2, cell // 8)
+                    draw.line([(cx - half, cy + half), (cx, cy), (cx + half, cy + half)],
+                              fill=(60, 100, 170), width=max(1, cell // 20))
+    for (row, col), fill, text in ((gridworld.START, (255, 236, 170), "S"),
+                                   (gridworld.GOAL, (120, 200, 120), "G")):
+        draw.rectangle(box(row, col), fill=fill, outline=(150, 150, 150))
+        draw.text(((box(row, col)[0] + box(row, col)[2]) / 2, (box(row, col)[1] + box(row, col)[3]) / 2),
+                  text, font=font, fill=(40, 40, 40), anchor="mm")
+    background = np.array(canvas)
+
+    def show(state: np.ndarray) -> np.ndarray:
+        row, col = (int(v) for v in gridworld.free_cells()[gridworld.cell_indices(state)[0]])
+        image = Image.fromarray(background)
+        ImageDraw.Draw(image).ellipse(box(row, col, inset=max(1, cell // 6)),
+                                      fill=(230, 90, 40), outline=(120, 40, 10))
+        return np.array(image)
+
+    return (lambda: show(env.state_vector())), show
 
 
 # --- Overlay --------------------------------------------------------------------
 
 def _label(image: np.ndarray, text: str, where: str) -> np.ndarray:
-    """Writes ``text`` on a darkened strip at the top or bottom left of ``image``."""
+    """Writes ``text`` on a darkened strip at the top or bottom left of ``image`` (in place)."""
     height = image.shape[0]
     font = _font(max(11, round(height / 30)))  # 16 px at 480 rows
     margin = max(4, round(font.size / 3))
     left, top, right, bottom = font.getbbox(text)
     y = margin if where == "top" else height - (bottom - top) - 3 * margin
-    pixels = np.array(image, dtype=np.uint8)
-    pixels[y:y + bottom - top + 2 * margin, :right + 3 * margin] //= 3  # dark strip: legible
-    canvas = Image.fromarray(pixels)
-    ImageDraw.Draw(canvas).text((margin, y + margin - top), text, font=font, fill=(255, 255, 255))
-    return np.array(canvas)
+    # Only the strip goes through Pillow: whole-frame copies would cost more than the text.
+    strip = image[y:y + bottom - top + 2 * margin, :right + 3 * margin]
+    canvas = Image.fromarray(strip // 3)  # dark background keeps the text legible
+    ImageDraw.Draw(canvas).text((margin, margin - top), text, font=font, fill=(255, 255, 255))
+    strip[...] = np.asarray(canvas)
+    return image
 
 
 _FONTS: dict[int, ImageFont.ImageFont] = {}
@@ -335,11 +405,6 @@ def _action(policy: Policy, state: np.ndarray) -> np.ndarray:
     return action[0]
 
 
-def _set_state(env: Any, state: np.ndarray) -> None:
-    physics = getattr(env, "physics", None)
-    (physics if physics is not None else env).set_state_vector(state)
-
-
 def _end_reason(env: Any, timestep: Any) -> str:
     if getattr(env, "diverged", None):
         return "diverged"
@@ -347,6 +412,8 @@ def _end_reason(env: Any, timestep: Any) -> str:
 
 
 def _domain_name(env: Any) -> str:
+    if isinstance(env, gridworld.GridWorld):
+        return "windy grid world" if env.windy else "grid world"
     physics = getattr(env, "physics", None)
     owner = type(physics) if physics is not None else type(env)
     return owner.__module__.rsplit(".", 1)[-1]

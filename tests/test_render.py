@@ -1,0 +1,268 @@
+"""Headless clips and GL backend selection (issue 7).
+
+The backend is fixed per process, so clips under EGL and OSMesa and the broken
+backends run in child processes; the rest runs in-process under the EGL backend
+that conftest.py selects.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import imageio.v2 as imageio_v2
+import imageio.v3 as imageio_v3
+import mujoco
+import numpy as np
+import pytest
+
+from tatl_mj import gl, render, suite
+from tatl_mj.suite import gridworld
+
+REPO = Path(__file__).resolve().parents[1]
+
+# What `tatl render` does: choose the backend (a clear message, no traceback, on
+# failure), then film a cart-pole pushed right at full force, 1 s at 12 fps.
+CLIP_SCRIPT = """\
+import sys
+from tatl_mj import gl
+try:
+    backend = gl.select_backend()
+except gl.GLBackendError as error:
+    sys.exit(f"tatl render: {error}")
+import numpy as np
+from tatl_mj import render, suite
+env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=1.0,
+                               width=160, height=120, fps=12, method_label="push")
+render.write_clip(frames, sys.argv[1], fps=12)
+print(backend)
+"""
+
+
+def _child_env(**overrides: str | None) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.update({k: v for k, v in overrides.items() if v is not None})
+    return env
+
+
+def _fake_gl_libraries(directory: Path, *names: str) -> str:
+    """Unloadable lib<name>.so* files that shadow the real ones through LD_LIBRARY_PATH."""
+    for name in names:
+        for suffix in [""] + [f".{i}" for i in range(10)]:
+            (directory / f"lib{name}.so{suffix}").write_bytes(b"not a shared library")
+    return str(directory)
+
+
+def _start(args: list[str], env: dict[str, str]) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, *args], env=env, cwd=REPO, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def test_clip_written_under_egl_and_osmesa(tmp_path):
+    # Both children run at once: each is mostly process start-up.
+    children = {
+        backend: (tmp_path / f"{backend}.mp4", _start(
+            ["-c", CLIP_SCRIPT, str(tmp_path / f"{backend}.mp4")],
+            _child_env(MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend),
+        ))
+        for backend in ("egl", "osmesa")
+    }
+    for backend, (path, child) in children.items():
+        stdout, stderr = child.communicate(timeout=120)
+        assert child.returncode == 0, stderr
+        assert stdout.strip() == backend
+        assert "Traceback" not in stderr, stderr
+        frames = np.stack(imageio_v2.mimread(path, format="FFMPEG", memtest=False))
+        assert frames.shape == (12, 120, 160, 3)
+        assert frames.std() > 10, "blank clip"
+        # The pole tips over and the floor slides under the tracking camera.
+        assert np.abs(frames[-1].astype(int) - frames[0].astype(int)).mean() > 2, "no motion"
+
+
+@pytest.mark.parametrize(
+    "overrides, fake, expected",
+    [
+        ({"MUJOCO_GL": "osmesa"}, ("OSMesa",), ["MUJOCO_GL=osmesa", "cannot load libOSMesa", "libosmesa6"]),
+        ({}, ("EGL", "OSMesa"), ["tried egl, then osmesa", "cannot load libEGL", "cannot load libOSMesa"]),
+        ({"MUJOCO_GL": "vulkan"}, (), ["MUJOCO_GL='vulkan'", "egl, osmesa, glfw"]),
+    ],
+    ids=["osmesa-missing", "all-missing", "bad-name"],
+)
+def test_broken_backend_fails_with_clear_message(tmp_path, overrides, fake, expected):
+    env = _child_env(**overrides)
+    if fake:
+        env["LD_LIBRARY_PATH"] = _fake_gl_libraries(tmp_path, *fake)
+    child = subprocess.run([sys.executable, "-c", CLIP_SCRIPT, str(tmp_path / "x.mp4")],
+                           env=env, cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert child.returncode != 0
+    for text in expected:
+        assert text in child.stderr, child.stderr
+    assert "Traceback" not in child.stderr, child.stderr
+    assert not (tmp_path / "x.mp4").exists()
+
+
+def test_unset_backend_falls_back_to_osmesa_when_egl_is_missing(tmp_path):
+    env = _child_env(LD_LIBRARY_PATH=_fake_gl_libraries(tmp_path, "EGL"))
+    script = "import os; from tatl_mj import gl; print(gl.select_backend(), os.environ['PYOPENGL_PLATFORM'])"
+    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO,
+                           capture_output=True, text=True, timeout=120)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout.split() == ["osmesa", "osmesa"]
+
+
+def test_select_backend_in_a_process_where_mujoco_is_imported():
+    # This process imported mujoco under conftest's backend: the choice is fixed.
+    current = os.environ["MUJOCO_GL"]
+    other = "osmesa" if current == "egl" else "egl"
+    environ = {"MUJOCO_GL": current, "PYOPENGL_PLATFORM": "wrong"}
+    assert gl.select_backend(environ) == current
+    assert environ["PYOPENGL_PLATFORM"] == current
+    with pytest.raises(gl.GLBackendError, match=f"already imported with the '{current}'"):
+        gl.select_backend({"MUJOCO_GL": other})
+    with pytest.raises(gl.GLBackendError, match="before anything imports mujoco"):
+        gl.select_backend({})
+    with pytest.raises(ValueError, match="MUJOCO_GL='Vulkan' is not a rendering backend"):
+        gl.select_backend({"MUJOCO_GL": "Vulkan"})
+
+
+# --- In-process rendering (EGL) -------------------------------------------------
+
+def _cartpole(seed: int = 0):
+    return suite.load("cartpole", "balance", task_kwargs={"random": seed})
+
+
+def _lqr_like(states: np.ndarray) -> np.ndarray:
+    return np.clip(states @ np.array([1.0, 1.6, 18.0, 3.0]), -20, 20)[:, None]
+
+
+def test_frames_follow_the_simulation_clock():
+    env = _cartpole()
+    frames = render.render_episode(env, _lqr_like, seconds=1.0, fps=10, width=64, height=48)
+    assert frames.shape == (10, 48, 64, 3) and frames.dtype == np.uint8
+    # The last frame is due at 0.9 s: 45 control steps of 0.02 s, no more.
+    assert env.physics.data.time == pytest.approx(0.9)
+
+
+def test_episode_end_freezes_last_frame():
+    env = _cartpole()
+    frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
+                                   width=64, height=48)
+    # Full force right topples the pole in well under a second; the rest is the held end.
+    assert env.physics.data.time < 1.0
+    changes = [np.any(a != b) for a, b in zip(frames[:-1], frames[1:])]
+    assert any(changes[:3]) and not any(changes[10:])
+
+
+def test_reset_mode_keeps_filming_new_episodes():
+    env = _cartpole()
+    frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
+                                   width=64, height=48, on_end="reset")
+    assert env.physics.data.time < 1.0  # a later episode, restarted from time 0
+    assert any(np.any(a != b) for a, b in zip(frames[20:-1], frames[21:]))
+
+
+def test_overlay_is_drawn_where_promised():
+    env = _cartpole()
+    plain = render.render_episode(env, _lqr_like, seconds=0.1, fps=10, camera="fixed")
+    env = _cartpole()
+    with mujoco.Renderer(env.physics.model.ptr, 480, 640) as renderer:
+        env.reset()
+        renderer.update_scene(env.physics.data.ptr, camera="fixed")
+        raw = renderer.render()
+    differs = np.any(plain[0] != raw, axis=2)
+    # Two small dark strips with text, at the top left and bottom left; nothing else.
+    assert differs[5:26, :100].all() and differs[452:472, :60].all()
+    assert not differs[30:445].any() and not differs[:, 320:].any()
+
+
+def test_side_by_side_shows_source_in_mapped_state():
+    def mirror(state: np.ndarray) -> np.ndarray:
+        return -state
+
+    env, source_env = _cartpole(0), _cartpole(1)
+    frames = render.render_episode(env, _lqr_like, seconds=0.5, fps=10, width=160, height=120,
+                                   source=(source_env, mirror), camera="fixed")
+    assert frames.shape == (5, 120, 320, 3)
+    # Redraw the source in the mirrored final target state, independently.
+    check = _cartpole(2)
+    check.reset()
+    check.physics.set_state_vector(-env.physics.state_vector())
+    with mujoco.Renderer(check.physics.model.ptr, 120, 160) as renderer:
+        renderer.update_scene(check.physics.data.ptr, camera="fixed")
+        expected = renderer.render()
+    right = frames[-1][:, 160:]
+    body = slice(20, 90)  # between the label strips
+    np.testing.assert_array_equal(right[body, 2:], expected[body, 2:])
+    assert np.any(frames[-1][body, :160] != right[body])  # the target differs from its mirror
+
+
+def test_bad_arguments_raise_value_errors():
+    env = _cartpole()
+    with pytest.raises(ValueError, match=r"camera 'nope'.*valid choices: \['fixed', 'tracking'\]"):
+        render.render_episode(env, _lqr_like, seconds=0.1, camera="nope")
+    with pytest.raises(ValueError, match="on_end must be one of"):
+        render.render_episode(env, _lqr_like, seconds=0.1, on_end="loop")
+    with pytest.raises(ValueError, match="seconds must be a positive number"):
+        render.render_episode(env, _lqr_like, seconds=0)
+    with pytest.raises(ValueError, match="width must be an integer"):
+        render.render_episode(env, _lqr_like, seconds=0.1, width=640.5)
+    with pytest.raises(ValueError, match="batch of one action"):
+        render.render_episode(env, lambda s: np.zeros((2, 1)), seconds=0.1, width=32, height=24)
+
+
+def test_write_clip_round_trips_and_rejects_bad_input(tmp_path):
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 256, size=(7, 31, 45, 3), dtype=np.uint8)
+    mp4 = render.write_clip(frames, tmp_path / "odd.mp4", fps=7)
+    decoded = np.stack(imageio_v2.mimread(mp4, format="FFMPEG", memtest=False))
+    assert decoded.shape == (7, 32, 46, 3)  # padded to even for yuv420p
+    ramp = np.repeat(np.linspace(0, 255, 45)[None, :, None], 31, axis=0).astype(np.uint8)
+    moving = np.stack([np.repeat(np.roll(ramp, 9 * i, axis=1), 3, axis=2) for i in range(4)])
+    gif = render.write_clip(moving, tmp_path / "a.gif", fps=5)
+    decoded_gif = imageio_v3.imread(gif, index=None)[..., :3]
+    assert decoded_gif.shape == (4, 31, 45, 3)
+    assert np.abs(decoded_gif.astype(int) - moving).max() <= 8  # palette quantisation
+    with pytest.raises(ValueError, match=r"extension must be one of \('.mp4', '.gif'\)"):
+        render.write_clip(frames, tmp_path / "clip.avi", fps=7)
+    with pytest.raises(ValueError, match=r"frames\[0\] must be an \(H, W, 3\) uint8"):
+        render.write_clip(frames.astype(np.float32), tmp_path / "f.mp4", fps=7)
+    with pytest.raises(ValueError, match="fps must be a positive number"):
+        render.write_clip(frames, tmp_path / "g.mp4", fps=0)
+
+
+def _agent_centre(panel: np.ndarray) -> np.ndarray:
+    """Pixel centroid (x, y) of the orange agent disc of a grid-world panel."""
+    r, g, b = (panel[..., i].astype(int) for i in range(3))
+    ys, xs = np.nonzero((r > 200) & (g < 120) & (b < 80))
+    assert len(xs) > 20, "agent not drawn"
+    return np.array([xs.mean(), ys.mean()])
+
+
+def test_grid_world_is_filmed_beside_its_source():
+    # The windy task's optimal policy by Q-iteration: 16 steps from S (5, 0) to G (5, 8).
+    next_state, reward, absorbing, _ = gridworld.transition_model(windy=True)
+    q = np.zeros(next_state.shape)
+    for _ in range(100):
+        q = reward + 0.9 * ~absorbing * q.max(axis=1)[next_state]
+
+    def policy(states: np.ndarray) -> np.ndarray:
+        return q[gridworld.cell_indices(states)].argmax(axis=1)
+
+    env = suite.load("gridworld", "windy", task_kwargs={"random": 0})
+    plain = suite.load("gridworld", "plain", task_kwargs={"random": 0})
+    frames = render.render_episode(env, policy, seconds=5.0, fps=4, width=320, height=240,
+                                   source=(plain, lambda state: state))
+    assert frames.shape == (20, 240, 640, 3)
+    first, last = frames[0], frames[-1]
+    np.testing.assert_array_equal(frames[-3], last)  # goal after 16 steps (4 s): frozen
+    assert not np.array_equal(frames[15], frames[16])
+    start, goal = _agent_centre(first[:, :320]), _agent_centre(last[:, :320])
+    assert abs(goal[1] - start[1]) < 1 and goal[0] > start[0] + 100  # same row, 8 cells right
+    # The source panel shows the same cell, without the wind band's blue.
+    np.testing.assert_allclose(_agent_centre(last[:, 320:]), goal)
+    blue = lambda p: np.mean((p[..., 2].astype(int) - p[..., 0]) > 30)  # noqa: E731
+    assert blue(last[30:-30, :320]) > 0.1 and blue(last[30:-30, 322:]) < 0.01
