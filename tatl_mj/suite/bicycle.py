@@ -1,6 +1,474 @@
-"""Placeholder until the bicycle domain lands (being written now)."""
+"""Bicycle balance: the Whipple benchmark bicycle below its self-stable speed.
 
+The bicycle of Meijaard, Papadopoulos, Ruina & Schwab (2007, Proc. R. Soc. A 463,
+"Linearized dynamics equations for the balance and steer of a bicycle: a benchmark
+and review"), built from rigid bodies whose two knife-edge tyres roll on the floor
+through MuJoCo contacts. A rear-wheel speed servo holds the forward speed, a rider
+shifts sideways at random (Randlov & Alstrom 1998) and the agent applies a torque to
+the handlebar. The paper's target task for transfer from the cart-pole.
+
+=================  ==========================================================
+State              ``[theta, theta_dot, omega, omega_dot]`` (float64)
+                   theta: steer (handlebar) angle (rad), the front frame's
+                   rotation about the steer axis, positive to the right;
+                   theta_dot: steer rate (rad/s);
+                   omega: roll angle of the rear frame from vertical (rad),
+                   positive when leaning right;
+                   omega_dot: roll rate (rad/s).
+                   Signs are the benchmark's; the MuJoCo frame is x forward,
+                   y left, z up.
+Actions            ``ACTIONS = [[-2], [0], [2]]``: handlebar torque (N m),
+                   positive turns the handlebar to the right. The actuator
+                   accepts any torque in +-2 N m (action spec shape (1,)).
+Control vector     ``ctrl = [steer torque (N m), rider shift set-point (m,
+                   +y = left), forward speed set-point (m/s)]``; the task
+                   fills in the last two (``Task.controls``).
+Rider noise        every control step the rider's centre of gravity is sent
+                   to a sideways offset uniform in +-``cg_noise`` (default
+                   0.02 m) drawn from the task's ``random``; a stiff position
+                   servo (10 Hz, critically damped) moves the 60 kg rider.
+Reward             +1 for every step that ends upright, 0 on the step that
+                   ends in a fall (as the cart-pole source task), so the
+                   return counts control steps balanced (x 0.01 s = the
+                   paper's "time balanced").
+Start state        upright, steer 0, roll uniform in +-1 deg, rates 0,
+                   rolling straight ahead at ``speed`` without slip.
+Episode end        a fall, with discount 0: ``|omega| > pi/15`` (12 deg,
+                   Randlov & Alstrom 1998); otherwise the time limit
+                   (default 1000 s, the paper's), which is not a failure.
+Timing             control step 0.01 s; physics step 0.001 s (implicitfast),
+                   so 10 physics steps per action.
+Parameters         ``speed`` (m/s, default 2.778 = 10 km/h, below the
+                   benchmark's self-stable window 4.29..6.02 m/s),
+                   ``cg_noise`` (m, default 0.02), :class:`BicycleParams`:
+                   tyre_half_width 0.005 m, rider_mass 60 kg (of the rear
+                   body's 85), tyre_friction 1.2, gravity 9.81 m/s^2.
+=================  ==========================================================
+
+Geometry and masses are the benchmark's Table 1 (see ``assets/mjcf/bicycle.xml``);
+docs/bicycle.md compares the measured stability window with the benchmark's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import xml.etree.ElementTree as ET
+from typing import Any
+
+import mujoco
 import numpy as np
+from dm_env import specs
+from scipy import optimize
 
-ACTIONS = np.zeros((0, 1))
-TASKS: dict = {}
+from tatl_mj.suite import common
+
+# Benchmark geometry (Meijaard et al. 2007, Table 1).
+WHEELBASE = 1.02  # m
+TRAIL = 0.08  # m
+STEER_TILT = math.pi / 10  # rad, steer axis back from vertical
+REAR_RADIUS = 0.3  # m
+FRONT_RADIUS = 0.35  # m
+REAR_BODY_MASS = 85.0  # kg, frame and rider together
+
+CONTROL_TIMESTEP = 0.01  # s
+DEFAULT_TIME_LIMIT = 1000.0  # s, the paper's
+DEFAULT_SPEED = 2.778  # m/s, 10 km/h
+DEFAULT_CG_NOISE = 0.02  # m
+ROLL_LIMIT = math.pi / 15  # rad, 12 degrees
+START_ROLL = math.radians(1.0)  # rad, start roll uniform in +-START_ROLL
+MAX_CG_NOISE = 0.25  # m, the rider servo's range
+TORQUE_LIMIT = 2.0  # N m
+
+ACTIONS = np.array([[-TORQUE_LIMIT], [0.0], [TORQUE_LIMIT]])
+
+# Points of the front assembly in the rear frame's body coordinates (origin at the
+# rear wheel centre, axes of the upright bicycle): steer-axis point level with the
+# front wheel centre, the axis direction (pointing down), the front wheel centre.
+_STEER_POINT = np.array(
+    [WHEELBASE + TRAIL - FRONT_RADIUS * math.tan(STEER_TILT), 0.0, FRONT_RADIUS - REAR_RADIUS]
+)
+_STEER_AXIS = np.array([math.sin(STEER_TILT), 0.0, -math.cos(STEER_TILT)])
+_FRONT_CENTRE = np.array([WHEELBASE, 0.0, FRONT_RADIUS - REAR_RADIUS])
+_Y = np.array([0.0, 1.0, 0.0])
+_Z = np.array([0.0, 0.0, 1.0])
+
+
+@dataclasses.dataclass(frozen=True)
+class BicycleParams:
+    """Physical parameters beyond the benchmark's; non-physical values raise ValueError."""
+
+    tyre_half_width: float = common.positive(
+        0.005, "half-width of the ellipsoid tyres (m); crown radius is width^2 / radius"
+    )
+    rider_mass: float = common.positive(60.0, "rider's share of the 85 kg rear body (kg)")
+    rider_servo_hz: float = common.positive(
+        10.0, "natural frequency of the critically damped servo that shifts the rider (Hz)"
+    )
+    tyre_friction: float = common.positive(1.2, "tyre-floor sliding friction coefficient")
+    gravity: float = common.positive(9.81, "gravitational acceleration (m/s^2)")
+
+    def __post_init__(self) -> None:
+        common.check_params(self)
+        if self.rider_mass >= REAR_BODY_MASS:
+            raise ValueError(
+                f"BicycleParams.rider_mass must be < {REAR_BODY_MASS} kg (the rear body), "
+                f"got {self.rider_mass!r}"
+            )
+
+
+def model_xml(params: BicycleParams | None = None) -> tuple[str, dict[str, bytes]]:
+    """The MJCF text (with ``params`` written in) and its include files."""
+    xml, assets = common.read_model("bicycle.xml")
+    if params is None:
+        return xml, assets
+    if not isinstance(params, BicycleParams):
+        raise ValueError(f"params must be a BicycleParams, got {type(params).__name__}")
+    root = ET.fromstring(xml)
+    root.find("option").set("gravity", f"0 0 {-params.gravity!r}")
+    # Frame and rider share the rear body's centre of mass; inertia splits with mass.
+    inertia = np.array([9.2, 11.0, 2.8, 0.0, -2.4, 0.0])
+    for body, mass in (("frame", REAR_BODY_MASS - params.rider_mass), ("rider", params.rider_mass)):
+        root.find(f".//body[@name='{body}']/inertial").attrib.update(
+            mass=repr(mass), fullinertia=" ".join(repr(float(v)) for v in inertia * mass / REAR_BODY_MASS)
+        )
+    kp, kv = _servo_gains(params.rider_mass, params.rider_servo_hz)
+    root.find(".//position[@name='rider_shift']").attrib.update(kp=repr(kp), kv=repr(kv))
+    for name, radius in (("rear_tyre", REAR_RADIUS), ("front_tyre", FRONT_RADIUS)):
+        root.find(f".//geom[@name='{name}']").set(
+            "size", f"{radius!r} {params.tyre_half_width!r} {radius!r}"
+        )
+    tyre = root.find(".//default[@class='tyre']/geom")
+    tyre.set("friction", f"{params.tyre_friction!r} 0 0")
+    root.find(".//geom[@name='floor']").set("friction", f"{params.tyre_friction!r} 0 0")
+    return ET.tostring(root, encoding="unicode"), assets
+
+
+def _servo_gains(mass: float, hertz: float) -> tuple[float, float]:
+    """Stiffness and damping of a critically damped position servo moving ``mass``."""
+    w = 2.0 * math.pi * hertz
+    return mass * w * w, 2.0 * mass * w
+
+
+# --- Geometry of the upright-ish bicycle (vectorised) -------------------------
+
+def _rotate_axis(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotates the fixed vector ``v`` about unit ``axis`` by each ``angle`` (Rodrigues)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
+
+
+def _frame_to_world(v: np.ndarray, roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """Applies R = Rx(roll) Ry(pitch) (heading +x) to rows of ``v``."""
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    x = v[:, 0] * cp + v[:, 2] * sp
+    z = -v[:, 0] * sp + v[:, 2] * cp
+    cr, sr = np.cos(roll), np.sin(roll)
+    return np.stack([x, v[:, 1] * cr - z * sr, v[:, 1] * sr + z * cr], axis=1)
+
+
+def _front_points(roll: np.ndarray, pitch: np.ndarray, steer: np.ndarray) -> dict[str, np.ndarray]:
+    """World points and axes of the bicycle with its rear contact at the origin."""
+    centre = _STEER_POINT + _rotate_axis(_FRONT_CENTRE - _STEER_POINT, _STEER_AXIS, steer)
+    axle = _rotate_axis(_Y, _STEER_AXIS, steer)
+    rear_centre = np.stack(
+        [np.zeros_like(roll), -REAR_RADIUS * np.sin(roll), REAR_RADIUS * np.cos(roll)], axis=1
+    )
+    front_centre = rear_centre + _frame_to_world(centre, roll, pitch)
+    front_axle = _frame_to_world(axle, roll, pitch)
+    shape = centre.shape
+    # The knife edge touches the floor at the rim point lowest along -z.
+    down = _Z - front_axle[:, 2:3] * front_axle
+    down /= np.linalg.norm(down, axis=1, keepdims=True)
+    return {
+        "rear_centre": rear_centre,
+        "front_centre": front_centre,
+        "front_axle": front_axle,
+        "front_contact": front_centre - FRONT_RADIUS * down,
+        "steer_point": rear_centre + _frame_to_world(np.broadcast_to(_STEER_POINT, shape), roll, pitch),
+        "steer_axis": _frame_to_world(np.broadcast_to(_STEER_AXIS, shape), roll, pitch),
+    }
+
+
+def frame_pitch(roll: np.ndarray, steer: np.ndarray) -> np.ndarray:
+    """Pitch of the rear frame (rad, nose down positive) that keeps both tyres on the floor.
+
+    The benchmark's holonomic constraint: given roll and steer angles (arrays of
+    the same shape), the pitch at which the front knife edge touches the floor
+    when the rear one does. Zero when upright and straight.
+    """
+    roll, steer = np.broadcast_arrays(np.asarray(roll, np.float64), np.asarray(steer, np.float64))
+    shape = roll.shape
+    roll, steer = roll.ravel(), steer.ravel()
+
+    def height(pitch: np.ndarray) -> np.ndarray:
+        return _front_points(roll, pitch, steer)["front_contact"][:, 2]
+
+    pitch = optimize.newton(height, np.zeros_like(roll), tol=1e-14, maxiter=50)
+    return np.asarray(pitch, np.float64).reshape(shape)
+
+
+class Physics(common.StatePhysics):
+    """Bicycle physics with the paper's state ``[theta, theta_dot, omega, omega_dot]``."""
+
+    STATE_SIZE = 4
+
+    def _address(self, joint: str) -> tuple[int, int]:
+        joint_id = self.model.name2id(joint, "joint")
+        return int(self.model.jnt_qposadr[joint_id]), int(self.model.jnt_dofadr[joint_id])
+
+    def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        qpos, qvel = np.atleast_2d(np.asarray(qpos, np.float64)), np.atleast_2d(np.asarray(qvel, np.float64))
+        root_q, root_v = self._address("root")
+        steer_q, steer_v = self._address("steer")
+        w, x, y, z = (qpos[:, root_q + 3 + i] for i in range(4))
+        norm2 = w * w + x * x + y * y + z * z
+        # Rows of the rotation matrix's third row (world z of the body axes).
+        r20 = 2.0 * (x * z - w * y) / norm2
+        r21 = 2.0 * (y * z + w * x) / norm2
+        r22 = 1.0 - 2.0 * (x * x + y * y) / norm2
+        roll = np.arcsin(np.clip(r21, -1.0, 1.0))
+        # d(r21)/dt = (omega_world x body_y) . z, with body-frame angular velocity.
+        wx, wz = qvel[:, root_v + 3], qvel[:, root_v + 5]
+        roll_rate = (r22 * wx - r20 * wz) / np.sqrt(np.maximum(1.0 - r21 * r21, 1e-300))
+        return np.stack([qpos[:, steer_q], qvel[:, steer_v], roll, roll_rate], axis=1)
+
+    def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Puts the bicycle at the origin heading +x, both tyres on the floor, rolling without slip.
+
+        The rear contact moves forward at :meth:`target_speed`; the frame pitch, yaw
+        rate and wheel rates follow from the rolling constraints. The rider is centred.
+        """
+        s = np.atleast_2d(np.asarray(states, np.float64))
+        n = len(s)
+        steer, steer_rate, roll, roll_rate = s.T
+        pitch = frame_pitch(roll, steer)
+        pts = _front_points(roll, pitch, steer)
+        speed = self.target_speed()
+        rear_axle = np.stack([np.zeros(n), np.cos(roll), np.sin(roll)], axis=1)
+        # Rear contact at rest: the rear centre moves forward at speed and sideways with roll.
+        sideways = -roll_rate * REAR_RADIUS
+        rear_velocity = np.stack([np.full(n, speed), sideways * np.cos(roll), sideways * np.sin(roll)], axis=1)
+        # Frame angular velocity = yaw_rate z + roll_rate x + pitch_rate rear_axle.
+        # The front contact's material velocity must vanish: 3 equations for
+        # yaw rate, pitch rate and the front wheel's spin.
+        to_contact = pts["front_contact"] - pts["rear_centre"]
+        x_axis = np.broadcast_to([1.0, 0.0, 0.0], (n, 3))
+        known = (
+            rear_velocity
+            + roll_rate[:, None] * np.cross(x_axis, to_contact)
+            + steer_rate[:, None] * np.cross(pts["steer_axis"], pts["front_contact"] - pts["steer_point"])
+        )
+        columns = np.stack(
+            [
+                np.cross(np.broadcast_to(_Z, (n, 3)), to_contact),
+                np.cross(rear_axle, to_contact),
+                np.cross(pts["front_axle"], pts["front_contact"] - pts["front_centre"]),
+            ],
+            axis=2,
+        )
+        yaw_rate, pitch_rate, front_spin = np.linalg.solve(columns, -known[:, :, None])[:, :, 0].T
+        rear_spin = speed / REAR_RADIUS - pitch_rate - yaw_rate * np.sin(roll)
+
+        half_r, half_p = roll / 2.0, pitch / 2.0
+        quat = np.stack(
+            [np.cos(half_r) * np.cos(half_p), np.sin(half_r) * np.cos(half_p),
+             np.cos(half_r) * np.sin(half_p), np.sin(half_r) * np.sin(half_p)],
+            axis=1,
+        )
+        omega_world = (
+            yaw_rate[:, None] * _Z + roll_rate[:, None] * x_axis + pitch_rate[:, None] * rear_axle
+        )
+        # Free joints take angular velocity in the body frame: R^T omega, R = Rx Ry.
+        cr, sr = np.cos(roll), np.sin(roll)
+        ox, oy = omega_world[:, 0], omega_world[:, 1] * cr + omega_world[:, 2] * sr
+        oz = -omega_world[:, 1] * sr + omega_world[:, 2] * cr
+        cp, sp = np.cos(pitch), np.sin(pitch)
+        omega_body = np.stack([ox * cp - oz * sp, oy, ox * sp + oz * cp], axis=1)
+
+        qpos = np.zeros((n, self.model.nq))
+        qvel = np.zeros((n, self.model.nv))
+        root_q, root_v = self._address("root")
+        qpos[:, root_q:root_q + 3] = pts["rear_centre"]
+        qpos[:, root_q + 3:root_q + 7] = quat
+        qvel[:, root_v:root_v + 3] = rear_velocity
+        qvel[:, root_v + 3:root_v + 6] = omega_body
+        for joint, angle, rate in (
+            ("steer", steer, steer_rate), ("rear_wheel", 0.0, rear_spin), ("front_wheel", 0.0, front_spin),
+        ):
+            q, v = self._address(joint)
+            qpos[:, q], qvel[:, v] = angle, rate
+        return qpos, qvel
+
+    def after_reset(self) -> None:
+        # dm_control's forward here runs with actuation disabled, which leaves
+        # actuator_velocity stale (0); the next step's speed servo would then kick
+        # the bicycle with kv * speed for one physics step, and mujoco.rollout
+        # (which computes it afresh) would no longer replay the episode.
+        self.forward()
+
+    def target_speed(self) -> float:
+        """Forward speed (m/s) that ``set_state_vector`` gives the bicycle (the task's ``speed``)."""
+        return float(self.model.numeric_data[self.model.numeric_adr[self.model.name2id("speed", "numeric")]])
+
+    def set_target_speed(self, speed: float) -> None:
+        """Sets the forward speed (m/s) used by ``set_state_vector``."""
+        self.model.numeric_data[self.model.numeric_adr[self.model.name2id("speed", "numeric")]] = speed
+
+    def steer_angle(self) -> float:
+        """theta (rad), positive steering right."""
+        return float(self.named.data.qpos["steer"][0])
+
+    def steer_rate(self) -> float:
+        """theta_dot (rad/s)."""
+        return float(self.named.data.qvel["steer"][0])
+
+    def roll_angle(self) -> float:
+        """omega (rad) from vertical, positive leaning right."""
+        return float(self.state_vector()[2])
+
+    def roll_rate(self) -> float:
+        """omega_dot (rad/s)."""
+        return float(self.state_vector()[3])
+
+    def forward_speed(self) -> float:
+        """Speed of the rear wheel centre along the heading (m/s).
+
+        The heading is where the rear wheel's plane meets the floor: axle x up.
+        """
+        axle = self.named.data.xmat["frame"].reshape(3, 3)[:, 1]
+        heading = np.cross(axle, _Z)
+        heading /= np.linalg.norm(heading)
+        return float(np.dot(self.named.data.qvel["root"][:3], heading))
+
+    def rider_offset(self) -> float:
+        """Rider's sideways shift from the frame's centre plane (m, positive to the left)."""
+        return float(self.named.data.qpos["rider_shift"][0])
+
+    def steer_torque(self) -> float:
+        """Handlebar torque the actuator applies now (N m), after clipping."""
+        return float(self.named.data.actuator_force["steer_torque"])
+
+
+class Task(common.StateTask):
+    """Keep the bicycle within 12 degrees of upright at a constant forward speed."""
+
+    def __init__(self, speed: float = DEFAULT_SPEED, cg_noise: float = DEFAULT_CG_NOISE, random: Any = None):
+        speed, cg_noise = float(speed), float(cg_noise)
+        if not (math.isfinite(speed) and 0.0 < speed <= 20.0):
+            raise ValueError(f"speed must be in (0, 20] m/s, got {speed!r}")
+        if not (math.isfinite(cg_noise) and 0.0 <= cg_noise <= MAX_CG_NOISE):
+            raise ValueError(f"cg_noise must be in [0, {MAX_CG_NOISE}] m, got {cg_noise!r}")
+        self.speed = speed
+        self.cg_noise = cg_noise
+        super().__init__(random=random)
+
+    def action_spec(self, physics: Physics) -> specs.BoundedArray:
+        return specs.BoundedArray(
+            shape=(1,), dtype=np.float64, minimum=[-TORQUE_LIMIT], maximum=[TORQUE_LIMIT],
+            name="steer_torque",
+        )
+
+    def controls(self, action_values: np.ndarray, random: Any) -> np.ndarray:
+        torque = np.asarray(action_values, np.float64).reshape(-1, 1)
+        n = len(torque)
+        rider = random.uniform(-self.cg_noise, self.cg_noise, size=n)
+        return np.column_stack([torque[:, 0], rider, np.full(n, self.speed)])
+
+    def initialize_episode(self, physics: Physics) -> None:
+        physics.set_target_speed(self.speed)
+        state = np.array([0.0, 0.0, self.random.uniform(-START_ROLL, START_ROLL), 0.0])
+        qpos, qvel = physics.qpos_qvel_from(state[None])
+        # dm_control already runs this inside physics.reset_context().
+        physics.data.qpos[:] = qpos[0]
+        physics.data.qvel[:] = qvel[0]
+        physics.data.ctrl[:] = [0.0, 0.0, self.speed]
+        super().initialize_episode(physics)
+
+    def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
+        return np.abs(np.asarray(states, np.float64)[:, 2]) > ROLL_LIMIT
+
+    def batch_reward(self, states: np.ndarray) -> np.ndarray:
+        return np.where(self.batch_absorbing(states), 0.0, 1.0)
+
+
+def balance(
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    random: Any = None,
+    environment_kwargs: dict[str, Any] | None = None,
+    speed: float = DEFAULT_SPEED,
+    cg_noise: float = DEFAULT_CG_NOISE,
+    params: BicycleParams | None = None,
+) -> common.Environment:
+    """Bicycle balance at ``speed`` m/s with rider noise up to ``cg_noise`` m."""
+    task = Task(speed=speed, cg_noise=cg_noise, random=random)
+    physics = Physics.from_xml_string(*model_xml(params))
+    physics.set_target_speed(task.speed)
+    return common.Environment(
+        physics, task, time_limit=time_limit,
+        control_timestep=CONTROL_TIMESTEP, **(environment_kwargs or {}),
+    )
+
+
+TASKS = {"balance": balance}
+
+
+# --- Linear stability, measured on the MuJoCo model ---------------------------
+
+def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settle: float = 0.5) -> np.ndarray:
+    """Eigenvalues (1/s) of the MuJoCo bicycle's lateral motion rolling straight at ``speed``.
+
+    The bicycle runs upright and uncontrolled for ``settle`` s (the rear servo
+    holds ``speed``), then MuJoCo's finite-difference linearisation of one physics
+    step (``mjd_transitionFD``, centred) gives the discrete map, whose eigenvalues
+    mu become ``log(mu) / timestep``. Kept: the benchmark's modes (weave, capsize,
+    castor) and any slow rider mode; dropped: neutral directions (position, yaw,
+    wheel angles, |lambda| < 2e-5), the speed servo's mode and contact modes
+    (|lambda| > 40). Sorted by real part.
+    """
+    if not (math.isfinite(speed) and speed > 0):
+        raise ValueError(f"speed must be a positive number of m/s, got {speed!r}")
+    physics = Physics.from_xml_string(*model_xml(params))
+    physics.set_target_speed(speed)
+    model, data = physics.model.ptr, physics.data.ptr
+    qpos, qvel = physics.qpos_qvel_from(np.zeros((1, Physics.STATE_SIZE)))
+    data.qpos[:], data.qvel[:], data.ctrl[:] = qpos[0], qvel[0], [0.0, 0.0, speed]
+    for _ in range(int(round(settle / model.opt.timestep))):
+        mujoco.mj_step(model, data)
+    transition = np.zeros((2 * model.nv + model.na, 2 * model.nv + model.na))
+    mujoco.mjd_transitionFD(model, data, 1e-6, True, transition, None, None, None)
+    mu, vectors = np.linalg.eig(transition)
+    lam = np.log(mu.astype(complex)) / model.opt.timestep
+    _, root_v = physics._address("root")
+    _, rear_v = physics._address("rear_wheel")
+    forward = np.abs(vectors[model.nv + root_v]) + np.abs(vectors[model.nv + rear_v])
+    keep = (np.abs(lam) > 2e-5) & (np.abs(lam) < 40.0) & (forward < 0.5)
+    lam = lam[keep]
+    return lam[np.argsort(lam.real)]
+
+
+def weave_growth(speed: float, params: BicycleParams | None = None) -> float:
+    """Real part (1/s) of the weave (the oscillatory lateral mode) at ``speed``."""
+    lam = lateral_eigenvalues(speed, params)
+    return float(lam[np.abs(lam.imag) > 1e-2].real.max())
+
+
+def capsize_growth(speed: float, params: BicycleParams | None = None) -> float:
+    """Largest real lateral eigenvalue (1/s) at ``speed``: the capsize mode above the weave speed."""
+    lam = lateral_eigenvalues(speed, params)
+    return float(lam[np.abs(lam.imag) <= 1e-2].real.max())
+
+
+def stability_window(
+    params: BicycleParams | None = None,
+    weave_bracket: tuple[float, float] = (3.0, 5.5),
+    capsize_bracket: tuple[float, float] = (5.0, 8.0),
+) -> tuple[float, float]:
+    """(weave speed, capsize speed) in m/s: where the weave and capsize modes cross zero.
+
+    The benchmark bicycle is self-stable between them (4.292 and 6.024 m/s in
+    Meijaard et al. 2007). Each bracket must hold one sign change.
+    """
+    weave = optimize.brentq(lambda v: weave_growth(v, params), *weave_bracket, xtol=1e-4)
+    capsize = optimize.brentq(lambda v: capsize_growth(v, params), *capsize_bracket, xtol=1e-4)
+    return float(weave), float(capsize)
