@@ -131,17 +131,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+RENDERING_COMMANDS = ("render", "bench")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    import os
+
     from tatl_mj import gl
 
-    try:
-        gl.select_backend()
-    except gl.GLBackendError as error:
-        if args.command in ("render", "bench"):
+    if args.command in RENDERING_COMMANDS:
+        try:
+            gl.select_backend()
+        except gl.GLBackendError as error:
             print(f"tatl {args.command}: {error}", file=sys.stderr)
             return 1
+    elif "mujoco" not in sys.modules:
+        # These commands never render: no GL library is needed, and a broken
+        # MUJOCO_GL setting must not stop them (worker processes inherit this).
+        os.environ["MUJOCO_GL"] = "disable"
+        os.environ.pop("PYOPENGL_PLATFORM", None)
     return int(args.func(args) or 0)
 
 

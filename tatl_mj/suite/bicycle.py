@@ -300,13 +300,6 @@ class Physics(common.StatePhysics):
             qpos[:, q], qvel[:, v] = angle, rate
         return qpos, qvel
 
-    def after_reset(self) -> None:
-        # dm_control's forward here runs with actuation disabled, which leaves
-        # actuator_velocity stale (0); the next step's speed servo would then kick
-        # the bicycle with kv * speed for one physics step, and mujoco.rollout
-        # (which computes it afresh) would no longer replay the episode.
-        self.forward()
-
     def target_speed(self) -> float:
         """Forward speed (m/s) that ``set_state_vector`` gives the bicycle (the task's ``speed``)."""
         return float(self.model.numeric_data[self.model.numeric_adr[self.model.name2id("speed", "numeric")]])

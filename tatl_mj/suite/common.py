@@ -92,6 +92,13 @@ class StatePhysics(engine.Physics):
         """(N, STATE_SIZE) paper states -> (N, nq), (N, nv). Inverse of ``states_from``."""
         raise NotImplementedError
 
+    def after_reset(self) -> None:
+        # dm_control's own after_reset runs forward() with actuation disabled,
+        # leaving actuator_velocity stale (0): a velocity servo (the bicycle's
+        # speed servo) would then kick the system on the next step, and
+        # mujoco.rollout, which computes it afresh, would not replay the episode.
+        self.forward()
+
     def state_vector(self) -> np.ndarray:
         return self.states_from(self.data.qpos[None], self.data.qvel[None])[0]
 
