@@ -43,8 +43,14 @@ class Unit:
         return f"{self.experiment}/seed{self.seed}/{self.name}"
 
 
-def work(spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes | None) -> dict:
-    """Runs one unit in a worker; never raises (a failure is returned as data)."""
+def work(
+    spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes | None, transfer: Any = None,
+) -> dict:
+    """Runs one unit in a worker; never raises (a failure is returned as data).
+
+    ``transfer`` is the method object for a method unit (a user's own
+    ``TransferMethod``, or None for the built-in of that name).
+    """
     start = time.perf_counter()
     try:
         preset = spec.preset(preset_name)
@@ -61,7 +67,8 @@ def work(spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes 
         else:
             artifacts = pickle.loads(source_blob)
             blob = None
-            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts)
+            methods = None if transfer is None else {unit.name: transfer}
+            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, methods=methods)
         record["wall_s"] = time.perf_counter() - start
         return {"record": record, "blob": blob}
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
@@ -163,10 +170,15 @@ def run(
     workers: int = 2,
     executor: str = "local",
     address: str | None = None,
-    methods: Iterable[str] = METHODS,
+    methods: Iterable[str] | dict[str, Any] = METHODS,
     progress: bool = True,
 ) -> dict:
-    """Runs (or resumes) every unit; writes and returns the summary."""
+    """Runs (or resumes) every unit; writes and returns the summary.
+
+    ``methods`` names built-in methods (``ta-tl``, ``uma-tl``, ``rl``) or maps
+    names to method objects implementing ``tatl_mj.transfer.method.TransferMethod``
+    (they must be picklable to run in worker processes).
+    """
     if executor not in EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
     names = [s.name for s in specs]
@@ -174,6 +186,7 @@ def run(
         raise ValueError(f"two specs share an experiment name: {names}")
     for spec in specs:
         spec.preset(preset)  # fail before any work on an unknown preset
+    custom = dict(methods) if isinstance(methods, dict) else {}
     seeds, methods = list(seeds), list(methods)
     run_dir = RunDirectory(out)
     _check_manifest(run_dir, preset, specs)
@@ -215,7 +228,7 @@ def run(
             bar.update(1)
             continue
         blob = run_dir.blob_path(unit.experiment, unit.seed).read_bytes()
-        jobs.append((unit, (by_name[unit.experiment], preset, unit, blob)))
+        jobs.append((unit, (by_name[unit.experiment], preset, unit, blob, custom.get(unit.name))))
     for unit, result in dispatch(jobs):
         record(unit, result)
     bar.close()
