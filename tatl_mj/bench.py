@@ -1,0 +1,301 @@
+"""``tatl bench``: how fast tatl-mj collects, learns and renders on this machine.
+
+One process, one measurement after another, for cart-pole, pendulum, mountain
+car and bicycle:
+
+- ``dm_control``: a Python loop over the environment's ``step`` with random
+  actions (resetting at episode ends), the way a hand-written collector works;
+- ``sampler``: :func:`tatl_mj.sampling.collect`, whole random episodes in
+  lockstep on ``--threads`` MuJoCo threads, task logic included;
+- ``rollout``: raw ``mujoco.rollout`` of the bare model, open loop, no task
+  logic and no episode ends: the physical limit here.
+
+Then Fitted Q-Iteration on 100 000 cart-pole transitions, 640x480 frames per
+second from the tracking camera (under the current ``MUJOCO_GL``), and the peak
+memory of collecting 10^6 cart-pole transitions. ``--json`` prints one JSON
+object per line; the last one is the summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import time
+import tracemalloc
+from typing import Any
+
+import numpy as np
+
+DOMAINS = {"cartpole": "balance", "pendulum": "swingup", "mountain_car": "climb", "bicycle": "balance"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tatl bench``."""
+    parser.add_argument("--json", action="store_true", help="one JSON object per line, the summary last")
+    parser.add_argument(
+        "--domains", default=",".join(DOMAINS),
+        help=f"comma-separated subset of {', '.join(DOMAINS)} (default: all)",
+    )
+    parser.add_argument("--threads", type=int, default=2, help="MuJoCo threads for sampler and rollout (default 2)")
+    parser.add_argument("--seconds", type=float, default=2.0, help="target length of each timing (default 2 s)")
+    parser.add_argument(
+        "--memory-transitions", type=int, default=1_000_000,
+        help="cart-pole transitions collected for the memory figure (default 10^6; 0 skips it)",
+    )
+    parser.add_argument(
+        "--fqi-transitions", type=int, default=100_000,
+        help="cart-pole transitions FQI is fitted on (default 100 000; 0 skips it)",
+    )
+    parser.add_argument("--render-frames", type=int, default=60, help="frames for the render figure (0 skips it)")
+
+
+def _check(args: argparse.Namespace) -> list[str]:
+    domains = [d for d in str(args.domains).split(",") if d]
+    unknown = sorted(set(domains) - set(DOMAINS))
+    if unknown or not domains:
+        raise ValueError(f"--domains: unknown {unknown or domains}; valid: {sorted(DOMAINS)}")
+    if args.threads < 1:
+        raise ValueError(f"--threads must be >= 1, got {args.threads}")
+    if not args.seconds > 0:
+        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+    for name in ("memory_transitions", "fqi_transitions", "render_frames"):
+        if getattr(args, name) < 0:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
+    return domains
+
+
+def machine() -> dict[str, Any]:
+    """CPU model, cores, and the versions that decide the figures."""
+    from importlib import metadata
+
+    import mujoco
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {
+        "cpu": cpu, "cores": os.cpu_count(), "usable_cores": usable,
+        "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+        "python": platform.python_version(), "mujoco": mujoco.__version__,
+        "dm_control": metadata.version("dm-control"), "numpy": np.__version__,
+        "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
+    }
+
+
+# --- Stepping -------------------------------------------------------------------------
+
+def time_dm_control(domain: str, task: str, seconds: float, seed: int = 0) -> dict[str, Any]:
+    """Random actions through ``env.step``, resetting at episode ends."""
+    from tatl_mj import suite
+
+    env = suite.load(domain, task, task_kwargs={"random": seed})
+    actions = suite.action_set(domain)
+    rng = np.random.default_rng(seed)
+    env.reset()
+    steps, start = 0, time.perf_counter()
+    while True:
+        for a in rng.integers(len(actions), size=100):
+            if env.step(actions[a]).last():
+                env.reset()
+        steps += 100
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed}
+
+
+def time_sampler(domain: str, task: str, seconds: float, threads: int, seed: int = 0) -> dict[str, Any]:
+    """:func:`sampling.collect` of random episodes, sized from a short pilot run."""
+    from tatl_mj import sampling
+
+    pilot_n = 2000
+    start = time.perf_counter()
+    sampling.collect(domain, task, pilot_n, seed=seed, n_threads=threads)  # also builds the cache
+    rate = pilot_n / (time.perf_counter() - start)
+    n = max(pilot_n, int(rate * seconds))
+    start = time.perf_counter()
+    tr = sampling.collect(domain, task, n, seed=seed + 1, n_threads=threads)
+    elapsed = time.perf_counter() - start
+    return {
+        "steps": n, "seconds": elapsed, "steps_per_s": n / elapsed,
+        "episodes": int(tr.last.sum()), "batched": sampling.is_batched(domain, task),
+    }
+
+
+def time_rollout(domain: str, task: str, seconds: float, threads: int, seed: int = 0) -> dict[str, Any]:
+    """Raw ``mujoco.rollout``: the bare model, open loop, constant control per control step."""
+    import mujoco
+    import mujoco.rollout
+
+    from tatl_mj import suite
+
+    env = suite.load(domain, task, task_kwargs={"random": seed})
+    physics = env.physics
+    model = physics.model.ptr
+    n_sub = int(round(env.control_timestep() / physics.timestep()))
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    n_batch = 256
+    starts = np.empty((n_batch, mujoco.mj_stateSize(model, spec)))
+    for row in starts:
+        env.reset()
+        mujoco.mj_getState(model, physics.data.ptr, row, spec)
+    rng = np.random.default_rng(seed)
+    actions = np.asarray(suite.action_set(domain), np.float64)
+    # Full control vectors (the bicycle adds rider and speed servo set-points).
+    controls = env.task.controls(actions, env.task.random)
+    datas = [mujoco.MjData(model) for _ in range(max(threads, 1))]
+    with mujoco.rollout.Rollout(nthread=threads) as pool:
+        def run(n_control: int) -> float:
+            picks = rng.integers(len(actions), size=(n_batch, n_control))
+            ctrl = np.repeat(controls[picks], n_sub, axis=1)
+            begin = time.perf_counter()
+            pool.rollout(model, datas, starts, ctrl)
+            return time.perf_counter() - begin
+
+        pilot = 10
+        rate = n_batch * pilot / run(pilot)
+        n_control = max(pilot, int(rate * seconds / n_batch))
+        elapsed = run(n_control)
+    steps = n_batch * n_control
+    return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed, "substeps": n_sub}
+
+
+# --- Learning, rendering, memory ----------------------------------------------------------
+
+def time_fqi(n: int, threads: int) -> dict[str, Any]:
+    """Linear-RBF FQI (20 iterations) on ``n`` random cart-pole transitions."""
+    from tatl_mj import sampling
+
+    try:
+        from tatl_mj.transfer import fqi, features
+    except ImportError as error:
+        return {"skipped": f"tatl_mj.transfer.fqi is not available: {error}"}
+    tr = sampling.collect("cartpole", "balance", n, seed=0, n_threads=threads)
+    basis = features.RBF.grid(
+        low=[-2.4, -3.0, -0.21, -3.5], high=[2.4, 3.0, 0.21, 3.5],
+        n_centers=[3, 3, 5, 5], sigma=[1.2, 1.5, 0.05, 0.9],
+    )
+    start = time.perf_counter()
+    fqi.fitted_q_iteration(tr, 3, fqi.LinearRegressor(basis), gamma=0.99, iterations=20)
+    elapsed = time.perf_counter() - start
+    return {"transitions": n, "features": basis.size(4), "iterations": 20, "seconds": elapsed}
+
+
+def time_render(frames: int) -> dict[str, Any]:
+    """640x480 frames per second from cart-pole's tracking camera."""
+    from tatl_mj import suite
+
+    env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+    env.reset()
+    try:
+        env.physics.render(480, 640, camera_id="tracking")  # context creation, not timed
+        start = time.perf_counter()
+        for _ in range(frames):
+            env.step(suite.action_set("cartpole")[1])
+            env.physics.render(480, 640, camera_id="tracking")
+        elapsed = time.perf_counter() - start
+    except Exception as error:  # no GL here: report it, keep the other figures
+        return {"skipped": f"rendering failed under MUJOCO_GL={os.environ.get('MUJOCO_GL', '')!r}: {error}"}
+    return {"frames": frames, "seconds": elapsed, "fps": frames / elapsed}
+
+
+def measure_memory(n: int, threads: int) -> dict[str, Any]:
+    """Peak traced memory (numpy arrays included) while collecting ``n`` cart-pole transitions.
+
+    ``max_rss_mb`` is the whole process's peak resident size so far (MuJoCo,
+    dm_control and the earlier timings included), an upper bound.
+    """
+    from tatl_mj import sampling
+
+    tracemalloc.start()
+    start = time.perf_counter()
+    tr = sampling.collect("cartpole", "balance", n, seed=0, n_threads=threads, n_parallel=1024)
+    elapsed = time.perf_counter() - start
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    stored = sum(a.nbytes for a in (tr.states, tr.actions, tr.rewards, tr.next_states, tr.absorbing, tr.last))
+    return {
+        "transitions": n, "stored_mb": stored / 2**20, "peak_mb": peak / 2**20,
+        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "seconds": elapsed,
+    }
+
+
+# --- The command ----------------------------------------------------------------------------
+
+def run(args: argparse.Namespace) -> int:
+    """Runs the benchmark; prints a table, or JSON lines with ``--json``. Returns 0."""
+    try:
+        domains = _check(args)
+    except ValueError as error:
+        print(f"tatl bench: {error}")
+        return 2
+    emit = (lambda record: print(json.dumps(record), flush=True)) if args.json else _print_record
+    info = machine()
+    if not args.json:
+        print(f"machine: {info['cpu']}, {info['cores']} cores ({info['usable_cores']} usable), "
+              f"load {info['load_average_1min']}, mujoco {info['mujoco']}, threads {args.threads}")
+    per_domain: dict[str, dict[str, float]] = {}
+    for domain in domains:
+        task = DOMAINS[domain]
+        figures = {
+            "dm_control": time_dm_control(domain, task, args.seconds / 2),
+            "sampler": time_sampler(domain, task, args.seconds, args.threads),
+            "rollout": time_rollout(domain, task, args.seconds / 2, args.threads),
+        }
+        for path, record in figures.items():
+            emit({"kind": "steps", "domain": domain, "task": task, "path": path, **record})
+        per_domain[domain] = {f"{p}_steps_per_s": r["steps_per_s"] for p, r in figures.items()}
+        per_domain[domain]["sampler_vs_dm_control"] = (
+            figures["sampler"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
+        )
+        per_domain[domain]["sampler_vs_rollout"] = (
+            figures["sampler"]["steps_per_s"] / figures["rollout"]["steps_per_s"]
+        )
+    extra: dict[str, Any] = {}
+    # Memory first, so that the process's peak RSS is not FQI's or the renderer's.
+    if args.memory_transitions:
+        extra["memory"] = measure_memory(args.memory_transitions, args.threads)
+        emit({"kind": "memory", **extra["memory"]})
+    if args.fqi_transitions:
+        extra["fqi"] = time_fqi(args.fqi_transitions, args.threads)
+        emit({"kind": "fqi", **extra["fqi"]})
+    if args.render_frames:
+        extra["render"] = time_render(args.render_frames)
+        emit({"kind": "render", **extra["render"]})
+    summary: dict[str, Any] = {"kind": "summary", "threads": args.threads, "machine": info}
+    if "cartpole" in per_domain:
+        summary.update(per_domain["cartpole"])
+    summary["domains"] = per_domain
+    summary["fqi_fit_s"] = extra.get("fqi", {}).get("seconds")
+    summary["render_fps"] = extra.get("render", {}).get("fps")
+    summary["memory_peak_mb"] = extra.get("memory", {}).get("peak_mb")
+    emit(summary)
+    return 0
+
+
+def _print_record(record: dict[str, Any]) -> None:
+    kind = record["kind"]
+    if kind == "steps":
+        print(f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
+              f"({record['steps']} steps in {record['seconds']:.2f} s)")
+    elif "skipped" in record:
+        print(f"{kind}: skipped ({record['skipped']})")
+    elif kind == "fqi":
+        print(f"FQI: {record['transitions']} transitions, {record['features']} RBF features, "
+              f"{record['iterations']} iterations in {record['seconds']:.2f} s")
+    elif kind == "render":
+        print(f"render: {record['fps']:.1f} frames/s at 640x480")
+    elif kind == "memory":
+        print(f"memory: {record['transitions']} cart-pole transitions stored in {record['stored_mb']:.1f} MB; "
+              f"peak {record['peak_mb']:.1f} MB while collecting ({record['seconds']:.1f} s), "
+              f"process max RSS so far {record['max_rss_mb']:.0f} MB")
+    elif kind == "summary":
+        for domain, figures in record["domains"].items():
+            print(f"{domain:>13}: sampler {figures['sampler_vs_dm_control']:.1f}x dm_control, "
+                  f"{figures['sampler_vs_rollout']:.2f}x raw rollout")

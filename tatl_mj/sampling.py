@@ -1,0 +1,534 @@
+"""Batched transitions at MuJoCo's speed: many episodes stepped in lockstep in C threads.
+
+Learners eat batches of transitions; a Python loop over ``env.step`` spends most
+of its time outside the physics. Here every parallel episode is one row of a
+``mujoco.batch.Batch`` (MuJoCo's thread pool over many simulations of one
+model), and a control step of all live episodes is one C call of
+``n_sub_steps`` ``mj_step``s with the control held constant, as dm_control
+does. Task logic runs vectorised through the domain contract
+(``states_from``, ``batch_reward``, ``batch_absorbing``, ``controls``), so the
+transitions are bit-identical to stepping the dm_control environment.
+
+Why ``mujoco.batch`` and not one ``mujoco.rollout`` call per control step: a
+Batch row is the whole ``mjSTATE_INTEGRATION`` state, warm start included, so
+an episode continues across calls exactly as one MjData would; ``rollout``
+restarts ``qacc_warmstart`` from zero on every call, which moves contact
+models (the bicycle) by ~1e-12 per step. Both run at the same speed; ``tatl
+bench`` times raw ``mujoco.rollout`` as the physical limit.
+
+Two more details make the replay exact. dm_control's legacy step (any
+integrator but RK4) begins with ``mj_step2`` on the stages of the last forward
+pass, which after a reset is ``Physics.after_reset``'s (run with actuation
+disabled by default); the first step of each episode is replayed through the
+domain's own reset hooks. And a MuJoCo warning during a step ends the episode
+with discount 0, reward 0 and the last finite state, as ``common.Environment``
+does.
+
+``collect`` returns the first ``n_transitions`` of the episodes in start
+order, so the data are what a sequential loop would collect; it starts
+episodes only as fast as they are expected to be needed, so that long
+(time-limited) episodes are not cut short and thrown away.
+
+Tasks whose model changes during an episode (``rollout_compatible = False``,
+the time-varying pendulum) and tasks without physics (the grid world) are
+stepped through their environments behind the same functions.
+
+Seeding: ``collect``/``evaluate`` with ``seed`` draw start states from the
+successive resets of the task created with ``task_kwargs["random"] = seed``;
+the same task ``random`` then feeds ``Task.controls`` (rider noise), and a
+``np.random.default_rng(seed)`` draws the random policy's actions. With
+``n_parallel=1`` a collection is exactly a plain loop over that environment.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from typing import Any, Callable
+
+import dm_env
+import mujoco
+import mujoco.batch
+import numpy as np
+from dm_control.rl import control
+
+from tatl_mj import suite
+from tatl_mj.transitions import Transitions
+
+IndexPolicy = Callable[[np.ndarray], np.ndarray]
+"""``policy(states (N, d)) -> (N,)`` indices into the domain's ``ACTIONS``."""
+
+ValuePolicy = Callable[[np.ndarray], np.ndarray]
+"""``policy(states (N, d)) -> (N, action_dim)`` action values in actuator units."""
+
+DEFAULT_PARALLEL = 256  # most episodes stepped together by collect()
+_MIN_LIVE = 8  # fewest, while more may be needed (a constant: results must not depend on threads)
+_INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
+_WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
+
+
+# --- Simulators ------------------------------------------------------------------
+
+def _kwargs_key(task_kwargs: dict[str, Any] | None) -> tuple[tuple[str, Any], ...]:
+    kwargs = dict(task_kwargs or {})
+    if "random" in kwargs:
+        raise ValueError("task_kwargs must not contain 'random'; pass seed instead")
+    return tuple(sorted(kwargs.items()))
+
+
+class _Simulator:
+    """A task's environment, and for physics tasks the Batch that steps its model."""
+
+    def __init__(self, domain: str, task: str, kwargs: tuple[tuple[str, Any], ...], n_threads: int):
+        self.domain, self.task_name, self.kwargs = domain, task, dict(kwargs)
+        self.n_threads = n_threads
+        self.env = self.make_env(0)
+        self.actions = np.asarray(suite.action_set(domain))
+        self.action_dim = 1 if self.actions.ndim == 1 else self.actions.shape[1]
+        physics = getattr(self.env, "physics", None)
+        self.fast = physics is not None and bool(getattr(self.env.task, "rollout_compatible", False))
+        if not self.fast:
+            return
+        self.physics = physics
+        self.model = physics.model.ptr
+        self.n_sub = int(round(self.env.control_timestep() / physics.timestep()))
+        # The state a freshly reset MjData has (time 0, no warm start); step_from
+        # writes qpos and qvel into it, as set_state_vector does.
+        data = mujoco.MjData(self.model)
+        self.blank_row = np.empty(mujoco.mj_stateSize(self.model, _INTEGRATION))
+        mujoco.mj_getState(self.model, data, self.blank_row, _INTEGRATION)
+        self._batch: mujoco.batch.Batch | None = None
+        # dm_control's legacy step (every integrator but RK4) starts a step with
+        # mj_step2 on the stages of the last forward pass; after a reset that is
+        # Physics.after_reset's (by default run with actuation disabled, which
+        # leaves actuator_velocity at zero). The first step of an episode is
+        # replayed through the domain's own reset hooks (see _first_substep).
+        self.legacy_first = bool(getattr(physics, "legacy_step", True)) and (
+            self.model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4
+        )
+
+    def make_env(self, random: Any) -> dm_env.Environment:
+        return suite.load(self.domain, self.task_name, task_kwargs={**self.kwargs, "random": random})
+
+    def new_batch(self, nsim: int) -> mujoco.batch.Batch:
+        """A Batch of ``nsim`` simulations of the task's model (about 2 ms to make)."""
+        return mujoco.batch.Batch(self.model, nsim=max(nsim, 1), nthread=self.n_threads)
+
+    def query_batch(self, nsim: int) -> mujoco.batch.Batch:
+        """The cached Batch for one-step queries, grown to at least ``nsim`` simulations.
+
+        collect() and evaluate() make their own, so that a policy may query
+        step_from() while they run.
+        """
+        if self._batch is None or self._batch.nsim < nsim:
+            self._batch = self.new_batch(nsim)
+        return self._batch
+
+    def step_limit(self, max_episode_steps: int | None) -> float:
+        """Steps after which an episode ends by time limit, as dm_control counts them.
+
+        Physics tasks only; environment loops keep their environment's own limit.
+        """
+        if max_episode_steps is not None:
+            return float(max_episode_steps)
+        time_limit = self.kwargs.get("time_limit")
+        if time_limit is None:
+            factory = suite.DOMAINS[self.domain].TASKS[self.task_name]
+            time_limit = inspect.signature(factory).parameters["time_limit"].default
+        # dm_control's own float expression, so that the count matches exactly.
+        return time_limit / (self.physics.timestep() * self.n_sub)
+
+    def advance(
+        self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray, first: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One control step of simulations ``ids`` (sorted): (next paper states, diverged).
+
+        ``first`` marks the simulations whose episode (or query) starts with
+        this step, right after a reset.
+        """
+        batch.bind("ctrl")[ids] = controls
+        warnings = batch.warning[:, :, _WARNING_NUMBER]
+        before = warnings[ids].copy()
+        diverged = np.zeros(len(ids), bool)
+        if self.legacy_first and first.any():
+            for k in np.flatnonzero(first):
+                diverged[k] = self._first_substep(batch.state[ids[k]])
+            if self.n_sub > 1:
+                batch.step(ids[first], nstep=self.n_sub - 1)
+            ids_rest = ids[~first]
+            if len(ids_rest):
+                batch.step(ids_rest, nstep=self.n_sub)
+        else:
+            batch.step(ids, nstep=self.n_sub)
+        # Any new MuJoCo warning is a PhysicsError in dm_control.
+        diverged |= (warnings[ids] != before).any(axis=1)
+        states = self.physics.states_from(batch.bind("qpos")[ids], batch.bind("qvel")[ids])
+        return states, diverged
+
+    def _first_substep(self, row: np.ndarray) -> bool:
+        """dm_control's first substep after a reset, on one state row in place.
+
+        Returns whether MuJoCo warned (the step diverged).
+        """
+        physics = self.physics
+        try:
+            with physics.reset_context():
+                mujoco.mj_setState(self.model, physics.data.ptr, row, _INTEGRATION)
+        except control.PhysicsError:
+            return True
+        mujoco.mj_step2(self.model, physics.data.ptr)
+        mujoco.mj_getState(self.model, physics.data.ptr, row, _INTEGRATION)
+        return bool(any(w.number for w in physics.data.ptr.warning))
+
+
+@functools.lru_cache(maxsize=16)
+def _cached(domain: str, task: str, kwargs: tuple[tuple[str, Any], ...], n_threads: int) -> _Simulator:
+    return _Simulator(domain, task, kwargs, n_threads)
+
+
+def _simulator(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int) -> _Simulator:
+    if isinstance(n_threads, bool) or not isinstance(n_threads, (int, np.integer)) or n_threads < 1:
+        raise ValueError(f"n_threads must be an integer >= 1, got {n_threads!r}")
+    key = _kwargs_key(task_kwargs)
+    try:
+        hash(key)
+    except TypeError:  # unhashable task kwargs: build without caching
+        return _Simulator(domain, task, key, int(n_threads))
+    return _cached(domain, task, key, int(n_threads))
+
+
+def is_batched(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> bool:
+    """Whether ``domain/task`` runs on the batched MuJoCo path (else an environment loop)."""
+    return _simulator(domain, task, task_kwargs, 1).fast
+
+
+# --- Argument checks -----------------------------------------------------------
+
+def _check_count(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _check_indices(indices: Any, n: int, n_actions: int) -> np.ndarray:
+    a = np.asarray(indices)
+    if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"policy must return ({n},) integer action indices, got {a.dtype} {a.shape}")
+    if n and (a.min() < 0 or a.max() >= n_actions):
+        raise ValueError(f"action indices must be in 0..{n_actions - 1}, got {a.min()}..{a.max()}")
+    return a.astype(np.int64, copy=False)
+
+
+def _check_values(values: Any, n: int, action_dim: int) -> np.ndarray:
+    v = np.asarray(values, np.float64)
+    if v.shape == (n,) and action_dim == 1:
+        v = v[:, None]
+    if v.shape != (n, action_dim):
+        raise ValueError(f"policy must return ({n}, {action_dim}) action values, got {v.shape}")
+    return v
+
+
+def _observed_state(timestep: dm_env.TimeStep) -> np.ndarray:
+    obs = timestep.observation
+    return np.asarray(obs["state"] if isinstance(obs, dict) else obs, np.float64)
+
+
+# --- Collection ------------------------------------------------------------------
+
+class _Episodes:
+    """Lengths of started episodes and which ones the first n transitions still need."""
+
+    def __init__(self, n: int):
+        self.n = n
+        self.lengths = np.zeros(64, np.int64)
+        self.count = 0
+
+    def start(self) -> int:
+        if self.count == len(self.lengths):
+            self.lengths = np.concatenate([self.lengths, np.zeros_like(self.lengths)])
+        self.count += 1
+        return self.count - 1
+
+    def total(self) -> int:
+        return int(self.lengths[: self.count].sum())
+
+    def covered(self, episodes: np.ndarray) -> np.ndarray:
+        """True where episodes 0..e already hold n transitions, so e need not go on.
+
+        Lengths only grow, so once true it stays true, and the first n
+        transitions in episode order never need a step beyond it.
+        """
+        return np.cumsum(self.lengths[: self.count])[episodes] >= self.n
+
+
+def collect(
+    domain: str,
+    task: str,
+    n_transitions: int,
+    seed: int,
+    policy: IndexPolicy | None = None,
+    task_kwargs: dict[str, Any] | None = None,
+    max_episode_steps: int | None = None,
+    n_threads: int = 2,
+    n_parallel: int = DEFAULT_PARALLEL,
+) -> Transitions:
+    """Exactly ``n_transitions`` transitions of whole episodes, in episode order.
+
+    Episodes start from the task's own start distribution (successive resets of
+    the task seeded with ``seed``) and take actions uniform over ``ACTIONS``
+    indices from ``np.random.default_rng(seed)``, or ``policy(states)``
+    evaluated for all live episodes at once. An episode ends at an absorbing
+    state or after ``max_episode_steps`` (default: the task's time limit), which
+    is not absorbing. ``n_parallel`` episodes run in lockstep; the result
+    depends on ``seed`` and ``n_parallel`` only, not on ``n_threads``.
+    """
+    n = _check_count("n_transitions", n_transitions, 1)
+    n_parallel = _check_count("n_parallel", n_parallel, 1)
+    if max_episode_steps is not None:
+        _check_count("max_episode_steps", max_episode_steps, 1)
+    sim = _simulator(domain, task, task_kwargs, n_threads)
+    rng = np.random.default_rng(seed)
+    if not sim.fast:
+        return _collect_env(sim, n, seed, rng, policy, max_episode_steps)
+    env = sim.make_env(seed)
+    physics, task_obj = env.physics, env.task
+    n_actions = len(sim.actions)
+    limit = sim.step_limit(max_episode_steps)
+    slots = min(n_parallel, n)
+    batch = sim.new_batch(slots)
+    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
+    episodes = _Episodes(n)
+    slot_episode = np.full(slots, -1, np.int64)
+    chunks: list[tuple[np.ndarray, ...]] = []
+    ended_steps, ended_count = 0, 0
+    while True:
+        # Start an episode only when the live ones are not expected to supply
+        # the transitions still missing: starting all slots at once would cut
+        # long episodes (time-limited ones) short and throw most of them away.
+        # This choice changes only the speed, never the result's episodes.
+        expected = ended_steps / ended_count if ended_count else (limit if np.isfinite(limit) else 100.0)
+        free = np.flatnonzero(slot_episode < 0)
+        running = episodes.lengths[slot_episode[slot_episode >= 0]]
+        total = episodes.total()
+        supply = total + np.maximum(expected - running, 1.0).sum()
+        n_live = len(running)
+        for slot in free:
+            # A few episodes at least while transitions are missing, so that the
+            # threads have work at once; none once n are recorded (termination).
+            if total >= n or (supply >= n and n_live >= _MIN_LIVE):
+                break
+            with physics.reset_context():
+                task_obj.initialize_episode(physics)
+            mujoco.mj_getState(sim.model, physics.data.ptr, batch.state[slot], _INTEGRATION)
+            slot_episode[slot] = episodes.start()
+            supply += expected
+            n_live += 1
+        live = np.flatnonzero(slot_episode >= 0)
+        if len(live) == 0:
+            break
+        ep = slot_episode[live]
+        states = physics.states_from(qpos[live], qvel[live])
+        if policy is None:
+            actions = rng.integers(n_actions, size=len(live))
+        else:
+            actions = _check_indices(policy(states), len(live), n_actions)
+        controls = task_obj.controls(sim.actions[actions], task_obj.random)
+        next_states, diverged = sim.advance(batch, live, controls, episodes.lengths[ep] == 0)
+        rewards = np.asarray(task_obj.batch_reward(next_states), np.float64)
+        absorbing = np.asarray(task_obj.batch_absorbing(next_states), bool)
+        episodes.lengths[ep] += 1
+        timeout = episodes.lengths[ep] >= limit
+        # dm_control: the time limit gives discount 1 even in a failure state;
+        # a diverged step ends with discount 0, reward 0, the last finite state.
+        absorbing = (absorbing & ~timeout) | diverged
+        if diverged.any():
+            next_states[diverged] = states[diverged]
+            rewards[diverged] = 0.0
+        last = absorbing | timeout
+        chunks.append((ep, states, actions, rewards, next_states, absorbing, last))
+        ended_steps += int(episodes.lengths[ep[last]].sum())
+        ended_count += int(last.sum())
+        done = last | episodes.covered(ep)
+        slot_episode[live[done]] = -1
+    return _assemble(chunks, n)
+
+
+def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
+    """The first ``n`` recorded transitions in (episode, step) order."""
+    episode = np.concatenate([c[0] for c in chunks])
+    # Stable: steps of an episode were recorded in time order.
+    order = np.argsort(episode, kind="stable")[:n]
+    fields = [np.concatenate([c[i] for c in chunks])[order] for i in range(1, 7)]
+    fields[5][-1] = True  # the collected segment ends here
+    return Transitions(*fields)
+
+
+def _collect_env(
+    sim: _Simulator, n: int, seed: int, rng: np.random.Generator,
+    policy: IndexPolicy | None, max_episode_steps: int | None,
+) -> Transitions:
+    """A plain loop over one environment (time-varying models, the grid world)."""
+    env = sim.make_env(seed)
+    n_actions = len(sim.actions)
+    state = _observed_state(env.reset())
+    d = len(state)
+    out = {
+        "states": np.empty((n, d)), "actions": np.empty(n, np.int64), "rewards": np.empty(n),
+        "next_states": np.empty((n, d)), "absorbing": np.zeros(n, bool), "last": np.zeros(n, bool),
+    }
+    i = 0
+    while i < n:
+        if i:
+            state = _observed_state(env.reset())
+        steps = 0
+        while i < n:
+            if policy is None:
+                a = int(rng.integers(n_actions))
+            else:
+                a = int(_check_indices(policy(state[None]), 1, n_actions)[0])
+            timestep = env.step(sim.actions[a])
+            steps += 1
+            next_state = _observed_state(timestep)
+            out["states"][i], out["actions"][i], out["next_states"][i] = state, a, next_state
+            out["rewards"][i] = timestep.reward
+            out["absorbing"][i] = timestep.last() and timestep.discount == 0.0
+            out["last"][i] = timestep.last() or steps == max_episode_steps
+            i += 1
+            if out["last"][i - 1]:
+                break
+            state = next_state
+    out["last"][-1] = True
+    return Transitions(**out)
+
+
+# --- One-step queries and evaluation ------------------------------------------------
+
+def step_from(
+    domain: str,
+    task: str,
+    states: np.ndarray,
+    action_indices: np.ndarray,
+    task_kwargs: dict[str, Any] | None = None,
+    n_threads: int = 2,
+) -> np.ndarray:
+    """Next states after one control step from each of ``states`` (N, d).
+
+    Each start is put in place as ``set_state_vector`` does (a fresh reset,
+    then the paper state), and ``action_indices`` (N,) index ``ACTIONS``.
+    Controls that draw noise use a ``RandomState(0)``. A step that diverges
+    returns its start state, as the environment does. The grid world answers
+    from its ``transition_model``.
+    """
+    sim = _simulator(domain, task, task_kwargs, n_threads)
+    env = sim.env
+    s = np.asarray(states, np.float64)
+    if s.ndim != 2 or not np.all(np.isfinite(s)):
+        raise ValueError(f"states must be a finite (N, d) array, got shape {s.shape}")
+    a = _check_indices(action_indices, len(s), len(sim.actions))
+    if not sim.fast:
+        return _step_from_env(sim, s, a)
+    if s.shape[1] != sim.physics.STATE_SIZE:
+        raise ValueError(f"{domain} states must have {sim.physics.STATE_SIZE} columns, got {s.shape[1]}")
+    if len(s) == 0:
+        return s.copy()
+    batch = sim.query_batch(len(s))
+    ids = np.arange(len(s))
+    batch.state[ids] = sim.blank_row
+    qpos, qvel = sim.physics.qpos_qvel_from(s)
+    batch.bind("qpos")[ids] = qpos
+    batch.bind("qvel")[ids] = qvel
+    controls = env.task.controls(sim.actions[a], np.random.RandomState(0))
+    next_states, diverged = sim.advance(batch, ids, controls, np.ones(len(ids), bool))
+    next_states[diverged] = s[diverged]
+    return next_states
+
+
+def _step_from_env(sim: _Simulator, s: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """One step per query through the environment, or the grid world's exact model."""
+    if sim.domain == "gridworld" and not sim.kwargs.get("stochastic_wind", False):
+        module = suite.DOMAINS["gridworld"]
+        next_index, _, _, cells = module.transition_model(windy=sim.task_name == "windy")
+        return cells[next_index[module.cell_indices(s), a]].astype(np.float64)
+    env = sim.env
+    target = getattr(env, "physics", env)  # whichever holds set_state_vector
+    out = np.empty_like(s)
+    for i in range(len(s)):
+        env.reset()
+        target.set_state_vector(s[i])
+        out[i] = _observed_state(env.step(sim.actions[a[i]]))
+    return out
+
+
+def evaluate(
+    domain: str,
+    task: str,
+    policy: ValuePolicy,
+    n_episodes: int,
+    seed: int,
+    task_kwargs: dict[str, Any] | None = None,
+    max_episode_steps: int | None = None,
+    n_threads: int = 2,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Undiscounted returns (n,) and lengths (n,) of ``policy`` over ``n_episodes``.
+
+    All episodes run in lockstep from the task's start distribution (the
+    successive resets of the task seeded with ``seed``); ``policy`` maps the
+    (N, d) states of the live episodes to (N, action_dim) action values.
+    """
+    n_episodes = _check_count("n_episodes", n_episodes, 1)
+    if max_episode_steps is not None:
+        _check_count("max_episode_steps", max_episode_steps, 1)
+    sim = _simulator(domain, task, task_kwargs, n_threads)
+    if not sim.fast:
+        return _evaluate_env(sim, policy, n_episodes, seed, max_episode_steps)
+    limit = sim.step_limit(max_episode_steps)
+    if not np.isfinite(limit):
+        raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
+    env = sim.make_env(seed)
+    physics, task_obj = env.physics, env.task
+    action_dim = sim.action_dim
+    batch = sim.new_batch(n_episodes)
+    ids = np.arange(n_episodes)
+    for i in ids:
+        with physics.reset_context():
+            task_obj.initialize_episode(physics)
+        mujoco.mj_getState(sim.model, physics.data.ptr, batch.state[i], _INTEGRATION)
+    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
+    returns = np.zeros(n_episodes)
+    lengths = np.zeros(n_episodes, np.int64)
+    live = ids
+    while len(live):
+        states = physics.states_from(qpos[live], qvel[live])
+        values = _check_values(policy(states), len(live), action_dim)
+        controls = task_obj.controls(values, task_obj.random)
+        next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
+        rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
+        returns[live] += rewards
+        lengths[live] += 1
+        ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
+        live = live[~ended]
+    return returns, lengths
+
+
+def _evaluate_env(
+    sim: _Simulator, policy: ValuePolicy, n_episodes: int, seed: int, max_episode_steps: int | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lockstep over one environment per episode, seeded ``(seed, i)``."""
+    envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
+    states = np.stack([_observed_state(e.reset()) for e in envs])
+    action_dim = sim.action_dim
+    returns = np.zeros(n_episodes)
+    lengths = np.zeros(n_episodes, np.int64)
+    live = np.arange(n_episodes)
+    while len(live):
+        values = _check_values(policy(states[live]), len(live), action_dim)
+        still = []
+        for j, i in enumerate(live):
+            timestep = envs[i].step(values[j])
+            returns[i] += timestep.reward
+            lengths[i] += 1
+            states[i] = _observed_state(timestep)
+            if not (timestep.last() or lengths[i] == max_episode_steps):
+                still.append(i)
+        live = np.asarray(still, np.int64)
+    return returns, lengths

@@ -1,0 +1,234 @@
+"""The batched sampler reproduces the dm_control environments exactly (issue 5)."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from tatl_mj import sampling, suite
+
+# Rider noise draws from the task's random in a different order when episodes
+# run in lockstep; with zero noise the draws do not change the dynamics.
+QUIET = {("bicycle", "balance"): {"cg_noise": 0.0}}
+# The issue asks for bitwise or 1e-12. Physics is bitwise; a domain whose paper
+# state is computed (bicycle: trig, a 3x3 solve) may differ in the last bit
+# between a batch of N states and a single one.
+ATOL = 1e-12
+
+
+def assert_close(actual, desired, err_msg=""):
+    np.testing.assert_allclose(actual, desired, rtol=0, atol=ATOL, err_msg=err_msg)
+PHYSICS_TASKS = [t for t in suite.ALL_TASKS if t[0] != "gridworld"]
+BATCHED_TASKS = [t for t in PHYSICS_TASKS if sampling.is_batched(*t)]
+
+
+def replay(domain: str, task: str, tr, seed: int, task_kwargs=None) -> None:
+    """Steps one environment (random=seed) through ``tr``'s episodes and actions."""
+    env = suite.load(domain, task, task_kwargs={**(task_kwargs or {}), "random": seed})
+    actions = suite.action_set(domain)
+    i = 0
+    while i < len(tr):
+        state = env.reset().observation["state"]
+        while i < len(tr):
+            assert_close(tr.states[i], state, err_msg=f"state {i}")
+            timestep = env.step(actions[tr.actions[i]])
+            state = timestep.observation["state"]
+            assert_close(tr.next_states[i], state, err_msg=f"next state {i}")
+            assert tr.rewards[i] == timestep.reward, i
+            assert tr.absorbing[i] == (timestep.last() and timestep.discount == 0.0), i
+            if i < len(tr) - 1:
+                assert tr.last[i] == timestep.last(), i
+            i += 1
+            if timestep.last():
+                break
+
+
+def draws_noise(domain: str, task: str) -> bool:
+    env = suite.load(domain, task, task_kwargs={"random": 0})
+    random = np.random.RandomState(0)
+    before = random.get_state()[2]
+    env.task.controls(np.asarray(suite.action_set(domain), np.float64)[:1], random)
+    return random.get_state()[2] != before
+
+
+@pytest.mark.parametrize("domain,task", suite.ALL_TASKS)
+def test_collect_is_the_environment_loop(domain, task):
+    # One episode at a time: bit-identical to the plain loop, noise included.
+    tr = sampling.collect(domain, task, 300, seed=5, n_parallel=1)
+    assert len(tr) == 300 and tr.last[-1]
+    replay(domain, task, tr, seed=5)
+
+
+@pytest.mark.parametrize("domain,task", BATCHED_TASKS)
+def test_lockstep_collect_is_the_environment_loop(domain, task):
+    if draws_noise(domain, task):
+        pytest.skip("controls draw noise: lockstep changes the draw order (exact at n_parallel=1)")
+    tr = sampling.collect(domain, task, 500, seed=11, n_parallel=13, n_threads=2)
+    assert tr.last.sum() >= 2
+    replay(domain, task, tr, seed=11)
+
+
+def test_contact_model_keeps_its_warm_start():
+    # The bicycle's tyre contacts use the constraint solver's warm start; a long
+    # lockstep episode stays bit-identical only if it is carried between steps.
+    kwargs = QUIET[("bicycle", "balance")]
+    upright = lambda s: np.where(s[:, 2] > 0, 2, 0)  # steer into the lean  # noqa: E731
+    tr = sampling.collect("bicycle", "balance", 150, seed=2, policy=upright, task_kwargs=kwargs,
+                          n_parallel=3)
+    env = suite.load("bicycle", "balance", task_kwargs={**kwargs, "random": 2})
+    state = env.reset().observation["state"]
+    for i in range(np.argmax(tr.last) + 1):
+        assert_close(state, tr.states[i])
+        state = env.step(suite.action_set("bicycle")[tr.actions[i]]).observation["state"]
+    assert np.argmax(tr.last) > 50  # the episode was long enough to mean something
+
+
+def test_episodes_are_contiguous_and_limited():
+    tr = sampling.collect("cartpole", "balance", 2000, seed=0, max_episode_steps=7)
+    follows = ~tr.last[:-1]
+    np.testing.assert_array_equal(tr.next_states[:-1][follows], tr.states[1:][follows])
+    assert not np.any(tr.absorbing & ~tr.last)
+    ends = np.flatnonzero(tr.last)
+    lengths = np.diff(np.concatenate([[-1], ends]))
+    assert lengths.max() <= 7
+    # dm_control: the time limit wins (discount 1) even if step 7 fails.
+    assert not np.any(tr.absorbing[ends[lengths == 7]])
+    assert tr.absorbing.any() and (~tr.absorbing[ends]).any()
+
+
+def test_deterministic_and_independent_of_threads():
+    a = sampling.collect("cartpole", "balance", 3000, seed=3, n_threads=1)
+    b = sampling.collect("cartpole", "balance", 3000, seed=3, n_threads=2)
+    c = sampling.collect("cartpole", "balance", 3000, seed=4, n_threads=2)
+    for name in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.states, c.states)
+
+
+def test_closed_loop_policy_balances_longer_than_random():
+    def lean(states):  # push the cart under the falling pole
+        return np.where(states[:, 2] + 0.5 * states[:, 3] > 0, 2, 0)
+
+    tr = sampling.collect("cartpole", "balance", 3000, seed=1, policy=lean, n_parallel=8)
+    np.testing.assert_array_equal(tr.actions, lean(tr.states))
+    random = sampling.collect("cartpole", "balance", 3000, seed=1)
+    assert tr.last.sum() * 5 < random.last.sum()
+    replay("cartpole", "balance", tr, seed=1)
+
+
+@pytest.mark.parametrize("domain,task", suite.ALL_TASKS)
+def test_step_from_is_one_environment_step(domain, task):
+    kwargs = QUIET.get((domain, task))
+    tr = sampling.collect(domain, task, 60, seed=9, task_kwargs=kwargs, n_parallel=1)
+    states = tr.states[~tr.absorbing][:20]
+    if domain == "gridworld":
+        states = states[np.any(states != suite.DOMAINS[domain].GOAL, axis=1)]
+    actions = np.arange(len(states)) % len(suite.action_set(domain))
+    got = sampling.step_from(domain, task, states, actions, task_kwargs=kwargs)
+    again = sampling.step_from(domain, task, states, actions, task_kwargs=kwargs)
+    np.testing.assert_array_equal(got, again)
+    env = suite.load(domain, task, task_kwargs={**(kwargs or {}), "random": 0})
+    holder = getattr(env, "physics", env)
+    for s, a, g in zip(states, actions, got):
+        env.reset()
+        holder.set_state_vector(s)
+        want = env.step(suite.action_set(domain)[a]).observation["state"]
+        assert_close(g, want)
+
+
+def test_step_from_divergence_returns_the_start_state():
+    states = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 2e10, 0.0, 0.0]])
+    got = sampling.step_from("cartpole", "balance", states, np.array([1, 1]))
+    env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+    env.reset()
+    env.physics.set_state_vector(states[1])
+    timestep = env.step(suite.action_set("cartpole")[1])
+    assert env.diverged and timestep.discount == 0.0
+    np.testing.assert_array_equal(got[1], states[1])
+    assert got[0, 2] == 0.0 and np.all(np.isfinite(got))
+
+
+@pytest.mark.parametrize("domain,task", [("cartpole", "balance"), ("pendulum", "swingup_timevarying")])
+def test_evaluate_matches_environment_returns(domain, task):
+    gain = np.array([[1.0, 1.0, 20.0, 3.0]]) if domain == "cartpole" else np.array([[-2.0, -1.0]])
+
+    def policy(states):
+        return np.clip(states @ gain.T, -20.0, 20.0)
+
+    returns, lengths = sampling.evaluate(domain, task, policy, 4, seed=7, max_episode_steps=120)
+    assert returns.shape == lengths.shape == (4,)
+    assert np.all(lengths >= 1) and np.all(lengths <= 120)
+    if sampling.is_batched(domain, task):
+        env = suite.load(domain, task, task_kwargs={"random": 7})
+        for i in range(4):
+            timestep, total, steps = env.reset(), 0.0, 0
+            while not timestep.last() and steps < 120:
+                timestep = env.step(policy(timestep.observation["state"][None])[0])
+                total += timestep.reward
+                steps += 1
+            assert (total, steps) == (returns[i], lengths[i])
+
+
+def test_memory_is_contiguous_arrays():
+    tracemalloc.start()
+    tr = sampling.collect("cartpole", "balance", 100_000, seed=0, n_parallel=512)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    for name in ("states", "next_states", "rewards", "actions"):
+        assert getattr(tr, name).flags.c_contiguous
+    size = sum(getattr(tr, f).nbytes for f in ("states", "actions", "rewards", "next_states", "absorbing", "last"))
+    assert size == 100_000 * 82
+    assert peak < 4 * size, peak  # 10^6 transitions: well under 1 GB
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [
+        ({"n_transitions": 0}, "n_transitions"),
+        ({"n_threads": 0}, "n_threads"),
+        ({"n_parallel": 0}, "n_parallel"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"task_kwargs": {"random": 1}}, "random"),
+        ({"policy": lambda s: np.full(len(s), 3)}, "action indices"),
+        ({"policy": lambda s: np.zeros(len(s) + 1, int)}, "policy"),
+    ],
+)
+def test_bad_input_names_the_field(kwargs, field):
+    args = {"n_transitions": 50, "seed": 0, **kwargs}
+    with pytest.raises(ValueError, match=field):
+        sampling.collect("cartpole", "balance", **args)
+
+
+def test_unknown_names_and_bad_states_raise():
+    with pytest.raises(ValueError, match="valid domains"):
+        sampling.collect("carpole", "balance", 10, seed=0)
+    with pytest.raises(ValueError, match="columns"):
+        sampling.step_from("cartpole", "balance", np.zeros((2, 3)), np.zeros(2, int))
+    with pytest.raises(ValueError, match="action indices"):
+        sampling.step_from("cartpole", "balance", np.zeros((2, 4)), np.array([0, 5]))
+
+
+def test_bench_prints_json_lines_with_the_summary_last(capsys):
+    import argparse
+    import json
+
+    from tatl_mj import bench
+
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args([
+        "--json", "--domains", "cartpole", "--seconds", "0.05", "--memory-transitions", "3000",
+        "--fqi-transitions", "0", "--render-frames", "0",
+    ])
+    assert bench.run(args) == 0
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    paths = {r["path"] for r in records if r["kind"] == "steps"}
+    assert paths == {"dm_control", "sampler", "rollout"}
+    summary = records[-1]
+    assert summary["kind"] == "summary"
+    for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s"):
+        assert summary[key] > 0
+    assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
+    assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
