@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 import zlib
 from functools import partial
 from typing import Any, Callable
@@ -149,6 +150,18 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 
 # --- phase III ----------------------------------------------------------------
 
+def _source_step(source: Side, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """Algorithm 1's query of the source simulator, from states clipped to the source's state box.
+
+    A mapped target state can fall outside the region the source system is
+    defined on (beyond the mountain car's track); the query is made from the
+    nearest state inside the box the source was learned on.
+    """
+    if source.data.sampling == "uniform":
+        states = np.clip(states, source.data.state_low, source.data.state_high)
+    return sampling.step_from(source.domain, source.task, states, actions, task_kwargs=source.task_kwargs)
+
+
 def _action_values(domain: str) -> np.ndarray:
     """Action values as the learners see them: actuator values, or grid moves."""
     if domain == "gridworld":
@@ -174,7 +187,7 @@ def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int
     return method.TransferProblem(
         source_q=artifacts.source_q,
         mapping=artifacts.mapping,
-        source_step=partial(sampling.step_from, source.domain, source.task, task_kwargs=source.task_kwargs),
+        source_step=partial(_source_step, source),
         source_actions=_action_values(source.domain),
         target_actions=target_actions,
         target_low=low,
@@ -185,6 +198,7 @@ def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int
         gamma=learner.gamma,
         iterations=learner.iterations,
         seed=derive_seed(seed, spec.name, "target-learning"),
+        apprentice_ridge=spec.apprentice.ridge,
         adaptive_actions=np.asarray(spec.apprentice.adaptive_actions, dtype=np.float64).reshape(-1, 1)
         if spec.apprentice.adaptive_actions else None,
     )
@@ -262,7 +276,9 @@ def run_method(
     curve = []
     for budget in preset.target_budgets:
         start = time.perf_counter()
-        policy = transfer.learn(problem, artifacts.target_stream.head(budget))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            policy = transfer.learn(problem, artifacts.target_stream.head(budget))
         learn_s = time.perf_counter() - start
         start = time.perf_counter()
         returns, lengths = evaluate(spec, preset, policy, eval_seed)
@@ -274,6 +290,8 @@ def run_method(
             "returns": [float(r) for r in returns],
             "mean_steps": float(np.mean(lengths)),
             "learn_s": learn_s,
+            # e.g. Algorithm 2's stopping rule not met within the budget
+            "warnings": sorted({str(w.message) for w in caught}),
             "evaluate_s": time.perf_counter() - start,
         })
     return {

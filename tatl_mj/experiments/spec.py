@@ -73,6 +73,9 @@ class ApprenticeSpec:
     # Algorithm 2 stops once |U_M - U_Mhat| <= zeta * (|U_M| + 1e-9), a relative gap.
     zeta: float = 0.1
     adaptive_actions: tuple[float, ...] = ()
+    # Ridge of the apprentice's least squares; > 0 where the basis cannot be
+    # full rank on small budgets (one-hot cells the random walk never visited).
+    ridge: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,6 +209,8 @@ def _check(spec: ExperimentSpec) -> None:
         _fail(p, "mapping.n_neighbors", "a positive integer", spec.mapping.n_neighbors)
     if spec.apprentice.zeta <= 0:
         _fail(p, "apprentice.zeta", "a number > 0", spec.apprentice.zeta)
+    if spec.apprentice.ridge < 0:
+        _fail(p, "apprentice.ridge", "a number >= 0", spec.apprentice.ridge)
     if not spec.presets:
         raise SpecError(f"{p}: at least one [presets.NAME] table is required (e.g. smoke, paper)")
     for name, preset in spec.presets.items():
