@@ -32,6 +32,11 @@ def mean_interval(values: np.ndarray, confidence: float = 0.95) -> tuple[np.ndar
     return mean, sem * stats.t.ppf(0.5 + confidence / 2, n - 1)
 
 
+def _order(method: str) -> tuple[int, str]:
+    known = list(LABELS)
+    return (known.index(method) if method in known else len(known), method)
+
+
 def _figure(name: str, experiment: dict, path: Path) -> None:
     import matplotlib
 
@@ -39,12 +44,14 @@ def _figure(name: str, experiment: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax_curve, ax_len) = plt.subplots(1, 2, figsize=(10, 3.8))
-    methods = experiment["methods"]
+    methods = {m: experiment["methods"][m] for m in sorted(experiment["methods"], key=_order)}
     max_budget = 1
+    levels = []
     for m, data in methods.items():
         samples = np.asarray(data["curve"]["samples"])
         max_budget = max(max_budget, samples.max())
         mean, half = mean_interval(np.asarray(data["curve"]["mean_return"]))
+        levels.extend(mean)
         color = COLORS.get(m)
         ax_curve.plot(samples, mean, marker="o", ms=3, color=color, label=LABELS.get(m, m))
         ax_curve.fill_between(samples, mean - half, mean + half, color=color, alpha=0.2, lw=0)
@@ -52,6 +59,12 @@ def _figure(name: str, experiment: dict, path: Path) -> None:
         ax_curve.axhline(experiment["random_return"], color="grey", ls=":", lw=1, label="random policy")
     if experiment.get("threshold") is not None:
         ax_curve.axhline(experiment["threshold"], color="black", ls="--", lw=0.8, label="threshold")
+    # With few seeds the t-interval can be far wider than the spread of the
+    # means; keep the means in view (the band is clipped, not hidden).
+    levels += [v for v in (experiment.get("random_return"), experiment.get("threshold")) if v is not None]
+    low, high = min(levels), max(levels)
+    pad = 0.15 * (high - low) if high > low else 1.0
+    ax_curve.set_ylim(low - pad, high + pad)
     ax_curve.set_xscale("log")
     ax_curve.set_xlabel("target samples")
     ax_curve.set_ylabel("average return")
