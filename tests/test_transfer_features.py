@@ -71,3 +71,90 @@ def test_bad_bandwidth_and_nan_states_raise():
         LinearFeatures()(np.array([[np.nan, 0.0]]))
     with pytest.raises(ValueError, match="columns"):
         RBF(np.zeros((2, 2)), 1.0)(np.zeros((1, 3)))
+
+
+# --- Periodic (angle) coordinates -------------------------------------------------------
+
+def test_periodic_rbf_measures_the_wrapped_distance_across_pi():
+    """A centre at theta = pi - 0.1 and a state at -pi + 0.2 are 0.3 apart on the circle:
+    phi = exp(-0.3^2 / (2 sigma^2)) exactly; the plain RBF sees them 2 pi - 0.3 apart."""
+    centers, sigma = np.array([[np.pi - 0.1, 0.0]]), [0.6, 1.5]
+    periodic = RBF(centers, sigma, bias=False, periodic=(True, False))
+    plain = RBF(centers, sigma, bias=False)
+    s = np.array([[-np.pi + 0.2, 0.0]])
+    np.testing.assert_allclose(periodic(s), [[np.exp(-0.5 * (0.3 / 0.6) ** 2)]], rtol=1e-12)
+    np.testing.assert_allclose(plain(s), [[np.exp(-0.5 * ((2 * np.pi - 0.3) / 0.6) ** 2)]], rtol=1e-12)
+    # The velocity coordinate is not wrapped: 8 rad/s stays 8 rad/s from the centre.
+    np.testing.assert_allclose(periodic(np.array([[np.pi - 0.1, 8.0]])), [[np.exp(-0.5 * (8 / 1.5) ** 2)]])
+
+
+def test_periodic_rbf_is_2pi_periodic_and_symmetric_about_the_wrap():
+    rng = np.random.default_rng(3)
+    rbf = RBF.grid([-np.pi, -8.0], [np.pi, 8.0], 100, [0.6, 1.5], periodic=[True, False])
+    s = np.column_stack([rng.uniform(-np.pi, np.pi, 200), rng.uniform(-8, 8, 200)])
+    for turns in (-2, 1, 3):
+        np.testing.assert_allclose(rbf(s + [2 * np.pi * turns, 0.0]), rbf(s), atol=1e-12)
+    # Hanging down: with a centre at the wrap (theta = -pi, the same point as +pi), the
+    # points -pi + e and pi - e, symmetric about it, get the same feature; the plain RBF
+    # sees them 2 pi - 2e apart (only the one at -pi + e is near its centre).
+    e = np.array([1e-9, 0.01, 0.2, 1.0])
+    left = np.column_stack([-np.pi + e, np.full(4, 2.0)])
+    right = np.column_stack([np.pi - e, np.full(4, 2.0)])
+    down = RBF(np.array([[-np.pi, 2.0]]), [0.6, 1.5], bias=False, periodic=(True, False))
+    np.testing.assert_allclose(down(left), down(right), rtol=1e-12)
+    np.testing.assert_allclose(down(left)[:, 0], np.exp(-0.5 * (e / 0.6) ** 2), rtol=1e-12)
+    plain_down = RBF(np.array([[-np.pi, 2.0]]), [0.6, 1.5], bias=False)
+    assert np.abs(plain_down(left) - plain_down(right)).max() > 0.5
+    # The grid's theta centres are symmetric about 0 on the circle (-pi counts as +pi), so
+    # mirrored states theta -> -theta have the same sorted feature values.
+    np.testing.assert_allclose(np.sort(rbf(left), axis=1), np.sort(rbf(right), axis=1), atol=1e-12)
+    # -pi + e and pi + e are one point.
+    np.testing.assert_allclose(rbf(left), rbf(left + [2 * np.pi, 0.0]), atol=1e-12)
+    # Continuity across the wrap: a jump of 2e-9 rad changes phi by < 1e-6 (the plain RBF jumps).
+    across = np.array([[np.pi - 1e-9, 1.0], [-np.pi + 1e-9, 1.0]])
+    assert np.abs(np.diff(rbf(across), axis=0)).max() < 1e-6
+    plain = RBF.grid([-np.pi, -8.0], [np.pi, 8.0], 100, [0.6, 1.5])
+    assert np.abs(np.diff(plain(across), axis=0)).max() > 0.1
+    # A full bandwidth matrix gives the same features as the diagonal vector.
+    full = RBF(rbf.centers, np.diag([0.6, 1.5]), periodic=(True, False))
+    np.testing.assert_allclose(full(s), rbf(s), atol=1e-12)
+
+
+def test_periodic_grid_puts_one_centre_per_angle_over_low_to_high_excluded():
+    rbf = RBF.grid([-np.pi, -8.0], [np.pi, 8.0], [10, 5], [0.6, 1.5], periodic=[True, False])
+    thetas = np.unique(rbf.centers[:, 0])
+    np.testing.assert_allclose(thetas, -np.pi + 2 * np.pi * np.arange(10) / 10)  # -pi in, +pi out
+    np.testing.assert_allclose(np.unique(rbf.centers[:, 1]), np.linspace(-8, 8, 5))  # ends in
+    assert rbf.periodic == (True, False)
+    # An all-False mask is the plain RBF.
+    assert RBF.grid([0, 0], [1, 1], [2, 2], 1.0, periodic=[False, False]).periodic is None
+    with pytest.raises(ValueError, match="span more than 2 pi"):
+        RBF.grid([-4.0, 0.0], [4.0, 1.0], [4, 2], 1.0, periodic=[True, False])
+
+
+def test_periodic_linear_features_use_sin_and_cos():
+    s = np.array([[np.pi / 2, 3.0], [-np.pi, -1.0]])
+    lin = LinearFeatures(periodic=[True, False])
+    np.testing.assert_allclose(lin(s), [[1.0, 1.0, 0.0, 3.0], [1.0, 0.0, -1.0, -1.0]], atol=1e-15)
+    assert lin.size(2) == 4 and LinearFeatures(bias=False, periodic=(False, True)).size(2) == 3
+    np.testing.assert_allclose(lin(s + [2 * np.pi, 0.0]), lin(s), atol=1e-12)
+    with pytest.raises(ValueError, match="periodic has 2 entries"):
+        lin(np.zeros((1, 3)))
+
+
+def test_make_features_accepts_periodic_and_names_bad_masks():
+    spec = {"kind": "rbf", "centers": 100, "low": [-3.14159, -8], "high": [3.14159, 8],
+            "sigma": [0.6, 1.5], "periodic": [True, False]}
+    rbf = make_features(spec, 2)
+    assert isinstance(rbf, RBF) and rbf.periodic == (True, False) and rbf.size(2) == 101
+    assert not np.any(np.isclose(rbf.centers[:, 0], 3.14159))  # no duplicate of -pi at +pi
+    explicit = make_features({"kind": "rbf", "centers": [[0.0, 0.0]], "sigma": 1.0, "periodic": [True, False]}, 2)
+    assert explicit.periodic == (True, False)
+    lin = make_features({"kind": "linear", "periodic": [True, False]}, 2)
+    assert lin.size(2) == 4
+    with pytest.raises(ValueError, match="one entry per state coordinate"):
+        make_features({**spec, "periodic": [True]}, 2)
+    with pytest.raises(ValueError, match="bools"):
+        make_features({**spec, "periodic": [1, 0]}, 2)
+    with pytest.raises(ValueError, match="RBF.periodic"):
+        RBF(np.zeros((2, 3)), 1.0, periodic=(True, False))

@@ -9,6 +9,16 @@ fitted to (s_i, a_i, s_{i+1}) triplets from a random policy (Algorithm 2, step
 the utility of the projected source policy on the true target and on the apprentice
 agree: ``|U_M(pi) - U_Mhat(pi)| <= zeta`` (Algorithm 2's stopping rule). As the paper
 does, the runner may reuse the alignment samples for it.
+
+Angles. A state coordinate marked ``periodic`` lives on the circle, wrapped to
+``[-pi, pi)`` (the pendulum hangs at theta = +-pi, exactly at the wrap), so ``s'`` jumps
+by 2 pi whenever a sample crosses it and no smooth W phi(s) + B a fits it. On such a
+coordinate the same control-affine model is written in increments on the circle::
+
+    s'_j  =  wrap(s_j + [W phi(s) + B a]_j),     fitted to the targets wrap(s'_j - s_j),
+
+which is the paper's model for the (continuous) angle itself; the other coordinates
+keep ``s' = W phi(s) + B a`` unchanged.
 """
 
 from __future__ import annotations
@@ -16,11 +26,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
-from tatl_mj.transfer.features import Features, as_states
+from tatl_mj.transfer.features import Features, as_states, periodic_difference, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
 
 
@@ -43,11 +53,14 @@ class Apprentice:
       W: (d, k) weights of the basis phi (the drift F_hat(s) = W phi(s)).
       B: (d, m) control matrix B_hat.
       features: the basis phi, (N, d) -> (N, k).
+      periodic: optional (d,) bools marking angle coordinates; on those, W phi(s) + B a
+        is the increment on the circle and ``s' = wrap(s + W phi(s) + B a)``.
     """
 
     W: np.ndarray
     B: np.ndarray
     features: Features
+    periodic: tuple[bool, ...] | None = None
 
     def __post_init__(self) -> None:
         w = np.atleast_2d(np.asarray(self.W, dtype=np.float64))
@@ -59,6 +72,7 @@ class Apprentice:
             raise ValueError("Apprentice.W and B must be finite")
         object.__setattr__(self, "W", w)
         object.__setattr__(self, "B", b)
+        object.__setattr__(self, "periodic", periodic_mask(self.periodic, w.shape[0], "Apprentice.periodic"))
 
     @property
     def state_dim(self) -> int:
@@ -69,16 +83,37 @@ class Apprentice:
         return self.B.shape[1]
 
     def drift(self, states: np.ndarray) -> np.ndarray:
-        """F_hat(s) = W phi(s), (N, d)."""
-        return self.features(as_states(states, dim=self.state_dim)) @ self.W.T
+        """F_hat(s) = W phi(s), (N, d), plus s on periodic coordinates (not wrapped).
+
+        So ``predict(s, a)`` is ``drift(s) + B a``, wrapped on the periodic coordinates.
+        """
+        s = as_states(states, dim=self.state_dim)
+        f = self.features(s) @ self.W.T
+        if self.periodic is not None:
+            cols = np.flatnonzero(self.periodic)
+            f[:, cols] += s[:, cols]
+        return f
 
     def predict(self, states: np.ndarray, action_values: np.ndarray) -> np.ndarray:
-        """(N, d) states, (N, m) actions (actuator units) -> (N, d) predicted next states."""
+        """(N, d) states, (N, m) actions (actuator units) -> (N, d) predicted next states
+        (periodic coordinates wrapped to [-pi, pi))."""
         s = as_states(states, dim=self.state_dim)
         a = _as_actions(action_values, len(s))
         if a.shape[1] != self.action_dim:
             raise ValueError(f"action_values must have {self.action_dim} columns, got {a.shape[1]}")
-        return self.features(s) @ self.W.T + a @ self.B.T
+        return self.wrap(self.drift(s) + a @ self.B.T)
+
+    def wrap(self, states: np.ndarray) -> np.ndarray:
+        """(N, d) states with the periodic coordinates wrapped to [-pi, pi) (a copy)."""
+        out = np.array(states, dtype=np.float64)
+        if self.periodic is not None:
+            cols = np.flatnonzero(self.periodic)
+            out[..., cols] = wrap_angle(out[..., cols])
+        return out
+
+    def difference(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``a - b`` between states, the shorter way round on periodic coordinates."""
+        return periodic_difference(a, b, self.periodic)
 
 
 def fit_apprentice(
@@ -87,10 +122,12 @@ def fit_apprentice(
     next_states: np.ndarray,
     features: Features,
     ridge: float = 0.0,
+    periodic: Sequence[bool] | None = None,
 ) -> Apprentice:
     """Least-squares ``[W B] = argmin sum_i |s_{i+1} - [W B] psi(s_i, a_i)|^2``, psi = [phi(s); a].
 
-    With ``ridge = 0`` the regressors psi must have full column rank (enough samples,
+    On ``periodic`` coordinates the target is the wrapped increment
+    ``wrap(s_{i+1} - s_i)`` instead of ``s_{i+1}`` (see the module docstring). With ``ridge = 0`` the regressors psi must have full column rank (enough samples,
     the actions must vary, no basis function duplicating an action); otherwise a
     ValueError says which. ``ridge > 0`` solves the ridge problem instead.
     """
@@ -101,6 +138,11 @@ def fit_apprentice(
     a = _as_actions(action_values, len(s))
     if not (math.isfinite(ridge) and ridge >= 0):
         raise ValueError(f"ridge must be a finite number >= 0, got {ridge!r}")
+    mask = periodic_mask(periodic, s.shape[1])
+    if mask is not None:
+        cols = np.flatnonzero(mask)
+        s_next = s_next.copy()
+        s_next[:, cols] = wrap_angle(s_next[:, cols] - s[:, cols])
     phi = features(s)
     psi = np.hstack([phi, a])
     n, p = psi.shape
@@ -119,7 +161,7 @@ def fit_apprentice(
     else:
         theta = np.linalg.solve(psi.T @ psi + ridge * np.eye(p), psi.T @ s_next)
     k = phi.shape[1]
-    return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features)
+    return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features, periodic=mask)
 
 
 def learn_apprentice(
@@ -130,6 +172,7 @@ def learn_apprentice(
     zeta: float,
     batch: int,
     ridge: float = 0.0,
+    periodic: Sequence[bool] | None = None,
 ) -> tuple[Apprentice, int]:
     """Algorithm 2: fit on the first n = batch, 2 batch, ... samples until |U_M - U_Mhat| <= zeta.
 
@@ -137,7 +180,8 @@ def learn_apprentice(
     policy (the runner computes it; it needs the target simulator). Returns the
     apprentice and the number of target samples it used. Batches too small for a
     full-rank fit are skipped. If the rule is never met, the fit on all samples is
-    returned with ``n_used = len(transitions)`` and a RuntimeWarning.
+    returned with ``n_used = len(transitions)`` and a RuntimeWarning. ``periodic``
+    marks angle coordinates, as in :func:`fit_apprentice`.
     """
     if not isinstance(transitions, Transitions):
         raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
@@ -154,13 +198,16 @@ def learn_apprentice(
     total = len(transitions)
     if total == 0:
         raise ValueError("transitions is empty; the apprentice needs samples")
+    periodic = periodic_mask(periodic, transitions.states.shape[1])  # bad masks fail here, not per batch
     sizes = list(range(batch, total, batch)) + [total]
     last_error: ValueError | None = None
     apprentice: Apprentice | None = None
     for n in sizes:
         part = transitions.head(n)
         try:
-            apprentice = fit_apprentice(part.states, actions[part.actions], part.next_states, features, ridge)
+            apprentice = fit_apprentice(
+                part.states, actions[part.actions], part.next_states, features, ridge, periodic
+            )
         except ValueError as error:  # too few or too uniform samples yet: grow the set
             last_error = error
             continue

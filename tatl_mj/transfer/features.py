@@ -9,6 +9,13 @@ The paper approximates Q (Phase I) and the target model (eq. ``Apprentice_model`
 - :class:`LinearFeatures`: ``[1, s]`` (the paper's plain linear basis for cart-pole);
 - :class:`OneHot`: a tabular indicator of a grid-world cell ``[row, col]``.
 
+Angles: :class:`RBF` and :class:`LinearFeatures` take an optional ``periodic`` mask (one
+bool per state coordinate). A periodic coordinate is an angle on the circle, wrapped to
+``[-pi, pi)`` (the pendulum's theta, hanging down at the wrap): the RBF measures the
+wrapped difference ``wrap(s - c)`` so it is 2 pi-periodic there, and the linear basis
+uses ``[sin, cos]`` of the angle instead of the raw value. :func:`wrap_angle` and
+:func:`periodic_mask` are shared with the apprentice and the TA-TL policy.
+
 Every basis is a frozen dataclass with ``__call__(states (N, d)) -> (N, k)`` float64
 and ``size(state_dim) -> k``. :func:`make_features` builds one from a plain dict.
 """
@@ -20,6 +27,41 @@ import itertools
 from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
+
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(x: np.ndarray) -> np.ndarray:
+    """Angles wrapped to ``[-pi, pi)``: ``(x + pi) mod 2 pi - pi``."""
+    return np.mod(np.asarray(x, dtype=np.float64) + np.pi, TWO_PI) - np.pi
+
+
+def periodic_mask(periodic: Any, dim: int | None = None, name: str = "periodic") -> tuple[bool, ...] | None:
+    """Checks a per-coordinate periodic mask: None, or ``dim`` bools (a tuple is returned).
+
+    A mask with no True entry is returned as None, so "no angles" has one spelling.
+    """
+    if periodic is None:
+        return None
+    if isinstance(periodic, (str, bytes)) or np.ndim(periodic) != 1:
+        raise ValueError(f"{name} must be a sequence of bools, one per state coordinate, got {periodic!r}")
+    values = list(periodic)
+    if not all(isinstance(v, (bool, np.bool_)) for v in values):
+        raise ValueError(f"{name} entries must be bools (true/false), got {values!r}")
+    if dim is not None and len(values) != dim:
+        raise ValueError(f"{name} must have one entry per state coordinate ({dim}), got {len(values)}")
+    mask = tuple(bool(v) for v in values)
+    return mask if any(mask) else None
+
+
+def periodic_difference(a: np.ndarray, b: np.ndarray, periodic: tuple[bool, ...] | None) -> np.ndarray:
+    """``a - b``, wrapped to ``[-pi, pi)`` on the periodic coordinates (last axis)."""
+    diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
+    if periodic is not None:
+        cols = np.flatnonzero(periodic)
+        diff[..., cols] = wrap_angle(diff[..., cols])
+    return diff
 
 
 @runtime_checkable
@@ -52,11 +94,15 @@ class RBF:
       sigma: the bandwidth L: (d,) per-coordinate widths (L = diag(sigma), in
         state units) or a (d, d) matrix (e.g. 1.2 I); it must be invertible.
       bias: prepend a constant 1 (so ``size = k + 1``).
+      periodic: optional (d,) bools; on a True coordinate ``s - c_j`` is replaced by
+        the wrapped difference ``(s - c_j + pi) mod 2 pi - pi``, so phi is 2 pi-periodic
+        in that angle and +pi, -pi are one point.
     """
 
     centers: np.ndarray
     sigma: np.ndarray
     bias: bool = True
+    periodic: tuple[bool, ...] | None = None
 
     def __post_init__(self) -> None:
         centers = np.atleast_2d(np.asarray(self.centers, dtype=np.float64))
@@ -78,6 +124,7 @@ class RBF:
             raise ValueError(f"RBF.sigma must be a finite invertible matrix, got {sigma.tolist()}")
         object.__setattr__(self, "centers", centers)
         object.__setattr__(self, "sigma", sigma)
+        object.__setattr__(self, "periodic", periodic_mask(self.periodic, d, "RBF.periodic"))
         # Centres and states are whitened by L once, so a call is one distance matrix.
         inverse = np.linalg.inv(sigma)
         object.__setattr__(self, "_inverse", inverse)
@@ -90,8 +137,13 @@ class RBF:
         n_centers: int | Sequence[int],
         sigma: Any,
         bias: bool = True,
+        periodic: Sequence[bool] | None = None,
     ) -> "RBF":
         """Centres on a regular grid spanning the box ``[low, high]`` (ends included).
+
+        On a ``periodic`` coordinate the centres are spaced over ``[low, high)``
+        instead (high is excluded: with ``[-pi, pi)`` a centre at -pi is also one at
+        +pi); such a coordinate may span at most 2 pi.
 
         ``n_centers`` is either the count per dimension (a sequence) or a total
         (an int), which is split into per-dimension counts whose product is
@@ -106,6 +158,13 @@ class RBF:
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
             raise ValueError(f"RBF.grid needs finite low < high, got low={lo.tolist()} high={hi.tolist()}")
         d = lo.size
+        mask = periodic_mask(periodic, d, "RBF.grid periodic") or (False,) * d
+        too_wide = [j for j in range(d) if mask[j] and hi[j] - lo[j] > TWO_PI * (1 + 1e-9)]
+        if too_wide:
+            raise ValueError(
+                f"RBF.grid periodic coordinates {too_wide} span more than 2 pi "
+                f"(low={lo.tolist()}, high={hi.tolist()}); an angle's centres lie within one turn"
+            )
         if isinstance(n_centers, (int, np.integer)):
             sig = np.asarray(sigma, dtype=np.float64)
             widths = np.diag(sig) if sig.ndim == 2 else np.broadcast_to(sig, (d,))
@@ -115,24 +174,40 @@ class RBF:
             if len(counts) != d or min(counts) < 1:
                 raise ValueError(f"RBF.grid n_centers must be {d} positive counts, got {list(n_centers)}")
         axes = [
-            np.linspace(l, h, c) if c > 1 else np.array([(l + h) / 2])
-            for l, h, c in zip(lo, hi, counts)
+            np.linspace(l, h, c, endpoint=not p) if c > 1 else np.array([(l + h) / 2])
+            for l, h, c, p in zip(lo, hi, counts, mask)
         ]
         centers = np.array(list(itertools.product(*axes)), dtype=np.float64)
-        return RBF(centers, sigma, bias)
+        return RBF(centers, sigma, bias, periodic)
 
     def size(self, state_dim: int) -> int:
         return len(self.centers) + int(self.bias)
 
     def __call__(self, states: np.ndarray) -> np.ndarray:
-        s = as_states(states, dim=self.centers.shape[1]) @ self._inverse.T
-        sq = (
-            np.einsum("ij,ij->i", s, s)[:, None]
-            - 2.0 * s @ self._scaled_centers.T
-            + np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)[None, :]
-        )
+        raw = as_states(states, dim=self.centers.shape[1])
+        if self.periodic is None:
+            s = raw @ self._inverse.T
+            sq = (
+                np.einsum("ij,ij->i", s, s)[:, None]
+                - 2.0 * s @ self._scaled_centers.T
+                + np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)[None, :]
+            )
+        else:
+            sq = self._wrapped_sq_distances(raw)
         phi = np.exp(-0.5 * np.maximum(sq, 0.0))
-        return np.hstack([np.ones((len(s), 1)), phi]) if self.bias else phi
+        return np.hstack([np.ones((len(raw), 1)), phi]) if self.bias else phi
+
+    def _wrapped_sq_distances(self, s: np.ndarray) -> np.ndarray:
+        """|L^-1 wrap(s - c_j)|^2, (N, k). The wrap is not a dot product, so the
+        differences are formed explicitly, in row blocks to bound memory."""
+        k, d = self.centers.shape
+        rows = max(1, (1 << 21) // (k * d))
+        out = np.empty((len(s), k))
+        for start in range(0, len(s), rows):
+            diff = periodic_difference(s[start:start + rows, None, :], self.centers[None, :, :], self.periodic)
+            z = diff @ self._inverse.T
+            out[start:start + rows] = np.einsum("nkd,nkd->nk", z, z)
+        return out
 
 
 def _split_count(total: int, spans: np.ndarray) -> list[int]:
@@ -163,15 +238,38 @@ def _split_count(total: int, spans: np.ndarray) -> list[int]:
 
 @dataclasses.dataclass(frozen=True)
 class LinearFeatures:
-    """``phi(s) = [1, s]`` (or ``s`` when ``bias`` is False)."""
+    """``phi(s) = [1, s]`` (or ``s`` when ``bias`` is False).
+
+    With a ``periodic`` mask each periodic coordinate s_j is replaced, in place, by
+    the pair ``[sin s_j, cos s_j]`` (continuous across the wrap, unlike s_j itself),
+    so ``size = d + (number of periodic coordinates) + bias``.
+    """
 
     bias: bool = True
+    periodic: tuple[bool, ...] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "periodic", periodic_mask(self.periodic, None, "LinearFeatures.periodic"))
+
+    def _check_dim(self, state_dim: int) -> None:
+        if self.periodic is not None and len(self.periodic) != state_dim:
+            raise ValueError(
+                f"LinearFeatures.periodic has {len(self.periodic)} entries, the states have {state_dim} coordinates"
+            )
 
     def size(self, state_dim: int) -> int:
-        return state_dim + int(self.bias)
+        self._check_dim(state_dim)
+        return state_dim + (sum(self.periodic) if self.periodic else 0) + int(self.bias)
 
     def __call__(self, states: np.ndarray) -> np.ndarray:
         s = as_states(states)
+        self._check_dim(s.shape[1])
+        if self.periodic is not None:
+            columns = [
+                np.stack([np.sin(s[:, j]), np.cos(s[:, j])], axis=1) if p else s[:, j:j + 1]
+                for j, p in enumerate(self.periodic)
+            ]
+            s = np.hstack(columns)
         return np.hstack([np.ones((len(s), 1)), s]) if self.bias else s.copy()
 
 
@@ -215,8 +313,8 @@ class OneHot:
 
 FEATURE_KINDS = ("rbf", "linear", "onehot")
 _FEATURE_KEYS = {
-    "rbf": {"kind", "centers", "low", "high", "sigma", "bias"},
-    "linear": {"kind", "bias"},
+    "rbf": {"kind", "centers", "low", "high", "sigma", "bias", "periodic"},
+    "linear": {"kind", "bias", "periodic"},
     "onehot": {"kind", "n_rows", "n_cols"},
 }
 
@@ -230,6 +328,10 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
     - ``{"kind": "linear", "bias": True}``
     - ``{"kind": "onehot", "n_rows": 6, "n_cols": 9}``
 
+    ``rbf`` and ``linear`` accept ``"periodic": [true, false]`` (one bool per state
+    coordinate) to treat angles as points on the circle (see :class:`RBF`,
+    :class:`LinearFeatures`, :meth:`RBF.grid`).
+
     Unknown kinds or keys raise ValueError listing the valid ones.
     """
     if not isinstance(spec, dict):
@@ -240,8 +342,9 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
     unknown = sorted(set(spec) - _FEATURE_KEYS[kind])
     if unknown:
         raise ValueError(f"unknown keys {unknown} in {kind} features spec; valid keys: {sorted(_FEATURE_KEYS[kind])}")
+    periodic = periodic_mask(spec.get("periodic"), state_dim, f"{kind} features periodic")
     if kind == "linear":
-        return LinearFeatures(bias=bool(spec.get("bias", True)))
+        return LinearFeatures(bias=bool(spec.get("bias", True)), periodic=periodic)
     if kind == "onehot":
         missing = sorted({"n_rows", "n_cols"} - set(spec))
         if missing:
@@ -260,8 +363,8 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
             raise ValueError(f"rbf features spec with a centre count needs {missing}")
         if len(spec["low"]) != state_dim or len(spec["high"]) != state_dim:
             raise ValueError(f"rbf features low/high must have state_dim={state_dim} entries")
-        return RBF.grid(spec["low"], spec["high"], centers, spec["sigma"], bias)
-    rbf = RBF(np.asarray(centers, dtype=np.float64), spec["sigma"], bias)
+        return RBF.grid(spec["low"], spec["high"], centers, spec["sigma"], bias, periodic)
+    rbf = RBF(np.asarray(centers, dtype=np.float64), spec["sigma"], bias, periodic)
     if rbf.centers.shape[1] != state_dim:
         raise ValueError(f"rbf features centers have {rbf.centers.shape[1]} columns, state_dim is {state_dim}")
     return rbf
@@ -269,4 +372,5 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
 
 __all__ = [
     "FEATURE_KINDS", "Features", "LinearFeatures", "OneHot", "RBF", "as_states", "make_features",
+    "periodic_difference", "periodic_mask", "wrap_angle",
 ]

@@ -7,7 +7,8 @@ For each target state s^T_i (paper symbols; eq. numbers refer to the paper's lab
 3. ``s_S_next = P_S(s_hat_S, a_S)``                     query the source simulator (one step)
 4. ``s_hat_T_next = chi(s_S_next)``                     project back (eq. ``projected_model``)
 5. ``a_T      = target_actions[a_S]``                   same index (Assumption 1)
-6. ``pi_ad    = s_hat_T_next - P_hat_T(s_T, a_T)``      adaptive term (eq. ``adaptive_term``)
+6. ``pi_ad    = s_hat_T_next - P_hat_T(s_T, a_T)``      adaptive term (eq. ``adaptive_term``),
+                                                        wrapped on the apprentice's periodic coordinates
 7. ``a        = a_T + K pi_ad``, ``K = pinv(B_hat)``    TA-TL policy (eq. ``modified_optimal_policy``)
 
 then clipped to the target actuator's ``[target_low, target_high]`` or snapped to the
@@ -22,6 +23,10 @@ sign in the target flips the action (the paper's negative-transfer argument).
 :class:`DiscreteTATLPolicy` is the same idea for a target whose actions are indices
 (the windy grid world): it picks the target action whose apprentice prediction lands
 nearest ``s_hat_T_next``.
+
+Angles: on the apprentice's ``periodic`` coordinates both policies take differences
+the shorter way round the circle (``Apprentice.difference``), so a projected next
+angle of -3.1 against a prediction of 3.1 is a gap of 0.08, not -6.2.
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ class TATLStep:
     s_S_next: np.ndarray  # (N, dS) source simulator's next state
     s_hat_T_next: np.ndarray  # (N, dT) chi(s_S_next), the projected source next state
     a_T: np.ndarray  # (N, mT) target action of the same index (Assumption 1)
-    pi_ad: np.ndarray  # (N, dT) s_hat_T_next - P_hat_T(s_T, a_T)
+    pi_ad: np.ndarray  # (N, dT) s_hat_T_next - P_hat_T(s_T, a_T), wrapped on periodic coordinates
     adaptive: np.ndarray  # (N, mT) K pi_ad
     action: np.ndarray  # (N, mT) a_T + K pi_ad, clipped or snapped
 
@@ -149,7 +154,7 @@ class TATLPolicy:
         """Runs Algorithm 1 on (N, dT) target states and returns every intermediate."""
         s_T, s_hat_S, a_S, s_S_next, s_hat_T_next = _source_decision(self, target_states)
         a_T = self.target_actions[a_S]
-        pi_ad = s_hat_T_next - self.apprentice.predict(s_T, a_T)
+        pi_ad = self.apprentice.difference(s_hat_T_next, self.apprentice.predict(s_T, a_T))
         adaptive = pi_ad @ self.K.T
         action = np.clip(a_T + adaptive, self.target_low, self.target_high)
         if self.adaptive_actions is not None:
@@ -195,12 +200,14 @@ class DiscreteTATLPolicy:
             )
 
     def distances(self, target_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(N, n) |P_hat_T(s_T, a_i) - s_hat_T_next| for every target action, and a_S."""
+        """(N, n) |P_hat_T(s_T, a_i) - s_hat_T_next| for every target action, and a_S
+        (the difference wrapped on the apprentice's periodic coordinates)."""
         s_T, _, a_S, _, s_hat_T_next = _source_decision(self, target_states)
         n, n_actions = len(s_T), len(self.target_actions)
         drift = self.apprentice.drift(s_T)  # (N, d)
         predictions = drift[:, None, :] + (self.target_actions @ self.apprentice.B.T)[None, :, :]
-        return np.linalg.norm(predictions - s_hat_T_next[:, None, :], axis=2).reshape(n, n_actions), a_S
+        gaps = self.apprentice.difference(predictions, s_hat_T_next[:, None, :])
+        return np.linalg.norm(gaps, axis=2).reshape(n, n_actions), a_S
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         """(N, dT) target states -> (N,) int64 target action indices."""
