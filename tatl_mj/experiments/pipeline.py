@@ -199,6 +199,9 @@ def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int
         iterations=learner.iterations,
         seed=derive_seed(seed, spec.name, "target-learning"),
         apprentice_ridge=spec.apprentice.ridge,
+        # The apprentice's basis names the angle coordinates; its increments wrap there too.
+        apprentice_periodic=tuple(spec.apprentice.features["periodic"])
+        if "periodic" in spec.apprentice.features else None,
         adaptive_actions=np.asarray(spec.apprentice.adaptive_actions, dtype=np.float64).reshape(-1, 1)
         if spec.apprentice.adaptive_actions else None,
     )

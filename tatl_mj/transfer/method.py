@@ -56,6 +56,8 @@ class TransferProblem:
       zeta: Algorithm 2's threshold on |utility_gap|.
       apprentice_batch: Algorithm 2's sample increment (default: all samples at once).
       apprentice_ridge: ridge of the apprentice's least squares (0: plain least squares).
+      apprentice_periodic: per target state coordinate, whether it is an angle
+        (the apprentice then works on wrapped increments; see ``apprentice``).
     """
 
     source_q: QFunction
@@ -76,6 +78,7 @@ class TransferProblem:
     zeta: float = 0.0
     apprentice_batch: int | None = None
     apprentice_ridge: float = 0.0
+    apprentice_periodic: tuple[bool, ...] | None = None
 
     def __post_init__(self) -> None:
         if not self.target_discrete and (self.target_low is None or self.target_high is None):
@@ -128,13 +131,14 @@ class TATL:
         if problem.utility_gap is None:
             apprentice = fit_apprentice(
                 target_samples.states, actions[target_samples.actions], target_samples.next_states,
-                problem.apprentice_features, problem.apprentice_ridge,
+                problem.apprentice_features, problem.apprentice_ridge, periodic=problem.apprentice_periodic,
             )
             used = len(target_samples)
         else:
             apprentice, used = learn_apprentice(
                 target_samples, actions, problem.apprentice_features, problem.utility_gap, problem.zeta,
                 problem.apprentice_batch or len(target_samples), problem.apprentice_ridge,
+                periodic=problem.apprentice_periodic,
             )
         common = dict(
             source_q=problem.source_q, mapping=problem.mapping, source_step=problem.source_step,
