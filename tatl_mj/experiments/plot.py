@@ -92,20 +92,25 @@ def _figure(name: str, experiment: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def median_samples(values: list) -> float:
+    """Median samples-to-threshold over seeds, a seed that never reached it counting as infinite."""
+    return float(np.median([math.inf if v is None else v for v in values]))
+
+
 def _fmt(values: list) -> str:
-    reached = [v for v in values if v is not None]
-    if not reached:
-        return f"not reached (0/{len(values)})"
-    text = f"{int(np.median(reached)):,}"
-    return text if len(reached) == len(values) else f"{text} ({len(reached)}/{len(values)} seeds)"
+    reached = sum(v is not None for v in values)
+    median = median_samples(values)
+    text = "not reached" if math.isinf(median) else f"{int(median):,}"
+    return f"{text} ({reached}/{len(values)} seeds reached)"
 
 
 def table(summary: dict) -> str:
     """Markdown: per experiment and method, final return, samples to threshold, ratio to TA-TL."""
     lines = [
-        f"Preset `{summary['preset']}`, seeds {summary['seeds']}; threshold = random + "
-        f"{summary['threshold_fraction']:.0%} of (best final - random). Ratios are median samples "
-        "to threshold of the method over TA-TL's (> 1: TA-TL needed fewer).",
+        f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Threshold = random return + "
+        f"{summary['threshold_fraction']:.0%} of (best method's final return - random return). "
+        "Samples to threshold: median over seeds, a seed that never reached it counting as "
+        "infinite. Ratio: that median over TA-TL's (> 1: TA-TL needed fewer target samples).",
         "",
     ]
     for name, exp in summary["experiments"].items():
@@ -113,31 +118,35 @@ def table(summary: dict) -> str:
         claim = exp["spec"].get("paper_claim")
         if claim:
             lines += [f"Paper: {claim}", ""]
-        if not exp["threshold_meaningful"]:
-            lines += ["**No method beat the random policy here; samples-to-threshold is meaningless.**", ""]
-        lines += ["| method | final return (mean ± sd) | target samples to threshold (median) | vs TA-TL |",
+        meaningful = exp["threshold_meaningful"]
+        if not meaningful:
+            lines += ["**No method beat the random policy here, so samples to threshold are not "
+                      "reported.**", ""]
+        lines += ["| method | final return (mean ± sd) | target samples to threshold | vs TA-TL |",
                   "|---|---|---|---|"]
         ta = exp["methods"].get("ta-tl")
-        ta_med = None
-        if ta:
-            reached = [v for v in ta["samples_to_threshold"] if v is not None]
-            ta_med = float(np.median(reached)) if reached else None
-        for m, data in exp["methods"].items():
+        ta_median = median_samples(ta["samples_to_threshold"]) if ta else math.inf
+        for m in sorted(exp["methods"], key=_order):
+            data = exp["methods"][m]
             finals = np.asarray(data["final_return"])
-            reached = [v for v in data["samples_to_threshold"] if v is not None]
-            if m == "ta-tl":
-                ratio = "-"
-            elif ta_med is None:
-                ratio = "TA-TL never reached it"
-            elif not reached:
-                ratio = f"> {max(data['curve']['samples']) / ta_med:.1f}x (never reached)"
+            median = median_samples(data["samples_to_threshold"])
+            if not meaningful:
+                samples, ratio = "n/a", "n/a"
             else:
-                ratio = f"{np.median(reached) / ta_med:.1f}x"
-            lines.append(f"| {LABELS.get(m, m)} | {finals.mean():.3g} ± {finals.std():.2g} | "
-                         f"{_fmt(data['samples_to_threshold'])} | {ratio} |")
-        lines += ["", f"Random policy: {exp['random_return']:.3g}; threshold: "
-                  f"{exp['threshold']:.3g}; target samples used for the mapping (shared by TA-TL and "
-                  f"UMA-TL, not counted above): {exp['mapping_target_samples']}.", ""]
+                samples = _fmt(data["samples_to_threshold"])
+                if m == "ta-tl":
+                    ratio = "-"
+                elif math.isinf(ta_median):
+                    ratio = "TA-TL (median seed) never reached it"
+                elif math.isinf(median):
+                    ratio = f"> {max(data['curve']['samples']) / ta_median:.0f}x (median seed never reached it)"
+                else:
+                    ratio = f"{median / ta_median:.1f}x"
+            lines.append(f"| {LABELS.get(m, m)} | {finals.mean():.4g} ± {finals.std():.2g} | {samples} | {ratio} |")
+        threshold = "n/a" if exp["threshold"] is None else f"{exp['threshold']:.4g}"
+        lines += ["", f"Random policy: {exp['random_return']:.4g}; threshold: {threshold}; target "
+                  f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
+                  f"{sorted(set(exp['mapping_target_samples']))}.", ""]
     return "\n".join(lines)
 
 
