@@ -64,6 +64,15 @@ def test_render_random_grid_world_clip(tmp_path):
     assert "Traceback" not in done.stderr
 
 
+def test_render_side_by_side_with_the_source(tmp_path):
+    clip = tmp_path / "pair.mp4"
+    done = tatl("render", "tasks/grid_to_windy.toml", "--method", "ta-tl", "--with-source", "--seconds", "1",
+                "--fps", "4", "--width", "160", "--height", "120", "--out", str(clip))
+    assert done.returncode == 0, done.stderr
+    frames = iio.imread(clip)
+    assert frames.shape == (4, 120, 320, 3)  # target and source panels side by side
+
+
 def test_render_with_no_working_backend_says_how_to_fix(tmp_path):
     done = tatl("render", "tasks/grid_to_windy.toml", "--method", "random", "--out", str(tmp_path / "x.mp4"),
                 env={"MUJOCO_GL": "nonsense"})
