@@ -213,14 +213,15 @@ class Physics(common.StatePhysics):
 
     STATE_SIZE = 4
 
-    def _address(self, joint: str) -> tuple[int, int]:
+    def joint_address(self, joint: str) -> tuple[int, int]:
+        """(qpos address, dof address) of a joint."""
         joint_id = self.model.name2id(joint, "joint")
         return int(self.model.jnt_qposadr[joint_id]), int(self.model.jnt_dofadr[joint_id])
 
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         qpos, qvel = np.atleast_2d(np.asarray(qpos, np.float64)), np.atleast_2d(np.asarray(qvel, np.float64))
-        root_q, root_v = self._address("root")
-        steer_q, steer_v = self._address("steer")
+        root_q, root_v = self.joint_address("root")
+        steer_q, steer_v = self.joint_address("steer")
         w, x, y, z = (qpos[:, root_q + 3 + i] for i in range(4))
         norm2 = w * w + x * x + y * y + z * z
         # Rows of the rotation matrix's third row (world z of the body axes).
@@ -288,7 +289,7 @@ class Physics(common.StatePhysics):
 
         qpos = np.zeros((n, self.model.nq))
         qvel = np.zeros((n, self.model.nv))
-        root_q, root_v = self._address("root")
+        root_q, root_v = self.joint_address("root")
         qpos[:, root_q:root_q + 3] = pts["rear_centre"]
         qpos[:, root_q + 3:root_q + 7] = quat
         qvel[:, root_v:root_v + 3] = rear_velocity
@@ -296,7 +297,7 @@ class Physics(common.StatePhysics):
         for joint, angle, rate in (
             ("steer", steer, steer_rate), ("rear_wheel", 0.0, rear_spin), ("front_wheel", 0.0, front_spin),
         ):
-            q, v = self._address(joint)
+            q, v = self.joint_address(joint)
             qpos[:, q], qvel[:, v] = angle, rate
         return qpos, qvel
 
@@ -432,8 +433,8 @@ def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settl
     mujoco.mjd_transitionFD(model, data, 1e-6, True, transition, None, None, None)
     mu, vectors = np.linalg.eig(transition)
     lam = np.log(mu.astype(complex)) / model.opt.timestep
-    _, root_v = physics._address("root")
-    _, rear_v = physics._address("rear_wheel")
+    _, root_v = physics.joint_address("root")
+    _, rear_v = physics.joint_address("rear_wheel")
     forward = np.abs(vectors[model.nv + root_v]) + np.abs(vectors[model.nv + rear_v])
     keep = (np.abs(lam) > 2e-5) & (np.abs(lam) < 40.0) & (forward < 0.5)
     lam = lam[keep]
