@@ -120,3 +120,23 @@ def test_ray_executor_matches_local(tmp_path):
     for name, method in local["experiments"]["ip_to_flipped_ip"]["methods"].items():
         other = distributed["experiments"]["ip_to_flipped_ip"]["methods"][name]
         assert other["curve"]["mean_return"] == method["curve"]["mean_return"]
+
+
+def test_affine_mapping_equal_to_identity_gives_identical_results():
+    from tatl_mj.experiments import pipeline
+
+    identity = tiny_spec()
+    table = tomllib.loads((ROOT / "tasks" / "ip_to_flipped_ip.toml").read_text())
+    table["presets"] = {"tiny": TINY}
+    table["source_learning"]["iterations"] = table["target_learning"]["iterations"] = 5
+    table["mapping"] = {"kind": "affine", "matrix": [[1.0, 0.0], [0.0, 1.0]]}
+    affine = spec_mod.parse_spec(table, "affine.toml")
+    preset = identity.preset("tiny")
+    a = pipeline.run_method(identity, preset, 0, "ta-tl", pipeline.learn_source(identity, preset, 0))
+    b = pipeline.run_method(affine, preset, 0, "ta-tl", pipeline.learn_source(affine, preset, 0))
+    assert [p["returns"] for p in a["curve"]] == [p["returns"] for p in b["curve"]]
+
+    table["mapping"]["matrix"] = [[1.0, 0.0, 0.0]]
+    wrong = spec_mod.parse_spec(table, "wrong.toml")
+    with pytest.raises(ValueError, match="mapping.matrix must have 2 rows"):
+        pipeline.learn_source(wrong, preset, 0)

@@ -81,3 +81,20 @@ def test_invalid_toml_names_the_file(tmp_path):
     path.write_text("name = \n")
     with pytest.raises(spec_mod.SpecError, match="broken.toml.*not valid TOML"):
         spec_mod.load_spec(path)
+
+
+def test_affine_mapping_keys():
+    table = _base()
+    table["mapping"] = {"kind": "affine", "matrix": [[1.0, 0.0], [0.0]]}
+    assert "mapping.matrix" in _error(table)
+    table["mapping"] = {"kind": "identity", "matrix": [[1.0]]}
+    assert "only to kind 'affine'" in _error(table)
+    table["mapping"] = {"kind": "affine", "matrix": [[1.0, 0.0], [0.0, -1.0]], "offset": [0.5, 0.0]}
+    spec = spec_mod.parse_spec(table, "ok.toml")
+    assert spec.mapping.matrix == ((1.0, 0.0), (0.0, -1.0))
+
+
+@pytest.mark.parametrize("path", sorted((TASKS[0].parent / "variants").glob("*.toml")), ids=lambda p: p.stem)
+def test_variant_specs_load(path):
+    spec = spec_mod.load_spec(path)
+    assert spec.name == path.stem and spec.preset("smoke") and spec.preset("paper")

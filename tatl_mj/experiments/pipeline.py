@@ -110,6 +110,19 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     return q, len(data)
 
 
+def _affine_mapping(spec: ExperimentSpec, target_dim: int) -> "alignment.AffineMapping":
+    matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)
+    source_dim = len(suite.load(spec.source.domain, spec.source.task, task_kwargs=spec.source.task_kwargs)
+                     .reset().observation["state"])
+    if matrix.shape != (target_dim, source_dim):
+        raise ValueError(
+            f"{spec.path}: mapping.matrix must have {target_dim} rows (target state) of {source_dim} "
+            f"numbers (source state), got shape {matrix.shape}"
+        )
+    offset = np.asarray(spec.mapping.offset or np.zeros(target_dim), dtype=np.float64)
+    return alignment.AffineMapping(matrix, offset)
+
+
 def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtifacts:
     """Phases I and II for one seed."""
     timings = {}
@@ -125,6 +138,8 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     start = time.perf_counter()
     if spec.mapping.kind == "identity":
         mapping, n_map_source, n_map_target = alignment.IdentityMapping(), 0, 0
+    elif spec.mapping.kind == "affine":
+        mapping, n_map_source, n_map_target = _affine_mapping(spec, target_stream.state_dim), 0, 0
     else:
         source_states = collect(
             spec.source, preset.alignment_samples, derive_seed(seed, spec.name, "alignment-source")

@@ -18,7 +18,7 @@ from typing import Any
 
 SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
-MAPPING_KINDS = ("identity", "manifold_alignment")
+MAPPING_KINDS = ("identity", "manifold_alignment", "affine")
 REGRESSORS = ("linear", "extra_trees")
 
 
@@ -62,9 +62,19 @@ class Learner:
 
 @dataclasses.dataclass(frozen=True)
 class Mapping:
+    """The inter-task mapping chi (source -> target) and chi_plus (target -> source).
+
+    ``identity`` (same state space), ``manifold_alignment`` (learned without
+    supervision from random-policy samples; ``n_neighbors``, ``mu``), or
+    ``affine``: a hand-coded chi(s_S) = matrix s_S + offset, with ``matrix``
+    given as rows (dT rows of dS numbers) and an optional ``offset`` (dT).
+    """
+
     kind: str = "identity"
     n_neighbors: int = 10
     mu: float = 1.0
+    matrix: tuple[tuple[float, ...], ...] = ()
+    offset: tuple[float, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,6 +215,14 @@ def _check(spec: ExperimentSpec) -> None:
     if spec.source_learning.method == "q_iteration" and spec.source.domain != "gridworld":
         raise SpecError(f"{p}: key 'source_learning.method' = 'q_iteration' needs a known model (domain 'gridworld')")
     _choice(p, "mapping.kind", spec.mapping.kind, MAPPING_KINDS)
+    if spec.mapping.kind == "affine":
+        rows = spec.mapping.matrix
+        if not rows or len({len(r) for r in rows}) != 1 or not rows[0]:
+            _fail(p, "mapping.matrix", "a non-empty array of equal-length rows for kind 'affine'", rows)
+        if spec.mapping.offset and len(spec.mapping.offset) != len(rows):
+            _fail(p, "mapping.offset", f"an array of {len(rows)} numbers (one per matrix row)", spec.mapping.offset)
+    elif spec.mapping.matrix or spec.mapping.offset:
+        raise SpecError(f"{p}: keys 'mapping.matrix' and 'mapping.offset' apply only to kind 'affine'")
     if spec.mapping.n_neighbors < 1:
         _fail(p, "mapping.n_neighbors", "a positive integer", spec.mapping.n_neighbors)
     if spec.apprentice.zeta <= 0:
