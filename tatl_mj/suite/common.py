@@ -22,7 +22,8 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_control.mujoco import engine
 
-MJCF_DIR = Path(__file__).resolve().parents[2] / "assets" / "mjcf"
+# tatl_mj/assets links to the repository's assets/ (and is a real folder in a wheel).
+MJCF_DIR = Path(__file__).resolve().parents[1] / "assets" / "mjcf"
 _COMMON_INCLUDES = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
 
 
