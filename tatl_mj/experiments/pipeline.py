@@ -92,6 +92,13 @@ def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) 
 
 # --- phases I and II ----------------------------------------------------------
 
+def _regressor_spec(learner) -> dict:
+    spec = {"kind": learner.regressor, "features": learner.features}
+    if learner.regressor == "linear":
+        spec["ridge"] = learner.ridge
+    return spec
+
+
 def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int]:
     learner = spec.source_learning
     n_actions = len(suite.action_set(spec.source.domain))
@@ -103,8 +110,7 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
         return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.name, "source-data"))
     regressor = fqi.make_regressor(
-        {"kind": learner.regressor, "features": learner.features, "seed": derive_seed(seed, spec.name, "source-fqi")},
-        data.state_dim,
+        {**_regressor_spec(learner), "seed": derive_seed(seed, spec.name, "source-fqi")}, data.state_dim,
     )
     q = fqi.fitted_q_iteration(data, n_actions, regressor, learner.gamma, learner.iterations)
     return q, len(data)
@@ -209,7 +215,7 @@ def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int
         target_high=high,
         target_discrete=discrete,
         apprentice_features=features.make_features(spec.apprentice.features, state_dim),
-        regressor={"kind": learner.regressor, "features": learner.features},
+        regressor=_regressor_spec(learner),
         gamma=learner.gamma,
         iterations=learner.iterations,
         seed=derive_seed(seed, spec.name, "target-learning"),

@@ -58,6 +58,9 @@ class Learner:
     regressor: str = "linear"
     gamma: float = 0.95
     iterations: int = 20
+    # Ridge of the linear regressor's least squares; a larger one keeps linear
+    # FQI from diverging on narrow RBFs (mountain car).
+    ridge: float = 1e-6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,6 +215,8 @@ def _check(spec: ExperimentSpec) -> None:
             _fail(p, f"{name}.gamma", "in [0, 1)", learner.gamma)
         if learner.iterations <= 0:
             _fail(p, f"{name}.iterations", "a positive integer", learner.iterations)
+        if learner.ridge < 0:
+            _fail(p, f"{name}.ridge", "a number >= 0", learner.ridge)
     if spec.source_learning.method == "q_iteration" and spec.source.domain != "gridworld":
         raise SpecError(f"{p}: key 'source_learning.method' = 'q_iteration' needs a known model (domain 'gridworld')")
     _choice(p, "mapping.kind", spec.mapping.kind, MAPPING_KINDS)
