@@ -47,14 +47,53 @@ def _run(args: argparse.Namespace) -> int:
         print(f"tatl run: {error}", file=sys.stderr)
         return 2
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    try:
+        methods = _methods(args.methods)
+    except ValueError as error:
+        print(f"tatl run: --methods: {error}", file=sys.stderr)
+        return 2
     summary = runner.run(
         specs, args.preset, seeds, args.out, workers=args.workers, executor=args.executor, address=args.address,
+        methods=methods,
     )
     failures = summary.get("failures", [])
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     for line in failures:
         print(f"FAILED {line}", file=sys.stderr)
     return 1 if failures else 0
+
+
+def _methods(text: str) -> dict:
+    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method}; ``module:attr`` entries are imported.
+
+    ``attr`` may be a class (instantiated without arguments) or an instance; the
+    method's ``name`` attribute names it in the results.
+    """
+    import importlib
+
+    from tatl_mj.transfer import method as method_mod
+
+    methods = {}
+    for entry in filter(None, (e.strip() for e in text.split(","))):
+        if ":" not in entry:
+            if entry not in method_mod.METHODS:
+                raise ValueError(
+                    f"unknown method {entry!r}; built-ins: {sorted(method_mod.METHODS)}, or module:Class"
+                )
+            methods[entry] = method_mod.METHODS[entry]
+            continue
+        module_name, _, attr = entry.partition(":")
+        try:
+            obj = getattr(importlib.import_module(module_name), attr)
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"cannot import {entry!r}: {error}") from None
+        obj = obj() if isinstance(obj, type) else obj
+        if not isinstance(obj, method_mod.TransferMethod):
+            raise ValueError(f"{entry!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+        methods[obj.name] = obj
+    if not methods:
+        raise ValueError("no methods given")
+    return methods
 
 
 def _plot(args: argparse.Namespace) -> int:
@@ -100,6 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="parallel work units (default: 2)")
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    p.add_argument("--methods", default="ta-tl,uma-tl,rl",
+                   help="comma-separated built-in methods and/or your own as module:Class (default: all built-ins)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser("plot", help="figures and results table of a finished run")

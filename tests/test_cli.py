@@ -53,6 +53,21 @@ def test_run_then_plot(tmp_path):
     assert "| TA-TL |" in table and "| UMA-TL |" in table and "| RL (no transfer) |" in table
 
 
+def test_run_with_a_plugin_method(tmp_path):
+    from test_runner import write_tiny
+
+    spec = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    env = {"PYTHONPATH": str(ROOT / "tests")}
+    done = tatl("run", str(spec), "--preset", "tiny", "--seeds", "1", "--workers", "1", "--out", str(out),
+                "--methods", "rl,plugin_method:ZeroTorque", env=env)
+    assert done.returncode == 0, done.stderr
+    methods = json.loads((out / "summary.json").read_text())["experiments"]["ip_to_flipped_ip"]["methods"]
+    assert set(methods) == {"rl", "zero"}
+    bad = tatl("run", str(spec), "--preset", "tiny", "--out", str(out), "--methods", "ta-tl,nope:Missing")
+    assert bad.returncode == 2 and "cannot import 'nope:Missing'" in bad.stderr
+
+
 def test_render_random_grid_world_clip(tmp_path):
     clip = tmp_path / "grid.mp4"
     done = tatl("render", "tasks/grid_to_windy.toml", "--method", "random", "--seconds", "1", "--fps", "8",
