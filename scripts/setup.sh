@@ -5,12 +5,16 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-if ! ldconfig -p 2>/dev/null | grep -q libOSMesa; then
+# Headless GL: Mesa's EGL (software llvmpipe without a GPU) and OSMesa.
+missing=()
+ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' || missing+=(libegl1 libgl1-mesa-dri)
+ldconfig -p 2>/dev/null | grep -q libOSMesa || missing+=(libosmesa6)
+if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    echo "setup: installing libosmesa6 (software OpenGL for headless rendering)"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libosmesa6 >/dev/null
+    echo "setup: installing ${missing[*]} (OpenGL for headless rendering)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
   else
-    echo "setup: libOSMesa not found; MUJOCO_GL=osmesa will not work (apt-get install libosmesa6)" >&2
+    echo "setup: missing ${missing[*]}; headless rendering needs them (apt-get install ${missing[*]})" >&2
   fi
 fi
 
