@@ -25,6 +25,10 @@ transfer by Ammar et al. 2015). :func:`align_manifolds` implements it in three s
    ``chi = (beta^T)^+ alpha^T`` and ``chi_plus = (alpha^T)^+ beta^T`` (pseudo-inverses,
    least squares where the dimensions differ), wrapped in the standardisations.
 
+:func:`align_transitions` is an optional, transition-aware variant (see its
+docstring): it uses (s, a, s') triplets, as Ammar et al. (2015) do, to fix the
+sign/permutation ambiguities that state samples alone leave open.
+
 Same-domain experiments use :class:`IdentityMapping`; a known affine map is an
 :class:`AffineMapping`. All three satisfy the :class:`Mapping` protocol.
 """
@@ -32,7 +36,8 @@ Same-domain experiments use :class:`IdentityMapping`; a known affine map is an
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol, runtime_checkable
+import itertools
+from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
@@ -41,6 +46,7 @@ from scipy.spatial import distance
 from sklearn import neighbors
 
 from tatl_mj.transfer.features import as_states
+from tatl_mj.transitions import Transitions
 
 
 @runtime_checkable
@@ -291,7 +297,223 @@ def align_manifolds(
     )
 
 
+# --- transition-aware alignment -------------------------------------------------
+
+SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _subset(t: Transitions, idx: np.ndarray) -> Transitions:
+    return Transitions(*(getattr(t, f.name)[idx] for f in dataclasses.fields(Transitions)))
+
+
+def _through(shared: LinearAlignment, m_z: np.ndarray) -> AffineMapping:
+    """The affine state map ``z_T = m_z z_S`` in ``shared``'s standardised coordinates."""
+    matrix = np.linalg.inv(shared.target_whitener) @ m_z @ shared.source_whitener
+    return AffineMapping(matrix, shared.target_mean - matrix @ shared.source_mean)
+
+
+def _increment_model(z: np.ndarray, z_next: np.ndarray, actions: np.ndarray, n_actions: int):
+    """Least-squares ``z' - z = F z + e[a]``: one state matrix, one offset per action index.
+
+    Offsets per index rather than ``B u`` need no assumption on how the two
+    tasks' action values compare, only Assumption 1 (actions matched by index).
+    """
+    design = np.hstack([z, np.eye(n_actions)[actions]])
+    theta, *_ = np.linalg.lstsq(design, z_next - z, rcond=None)
+    return theta[: z.shape[1]].T, theta[z.shape[1]:]  # F (d, d), e (n_actions, d)
+
+
+def _consistent_map(f_s, e_s, f_t, e_t) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares (M, m) with ``s_T = M s_S + m`` carrying the source model onto the target's.
+
+    Substituting the map into both increment models gives conditions linear in
+    (M, m): ``M F_S = F_T M`` and ``M e_S[i] = F_T m + e_T[i]`` for every action i.
+    For a controllable linear system they fix M uniquely (the state-space
+    similarity transform between two realisations of one input-output map,
+    ``M = C_T C_S^-1`` with C the controllability matrices). Each block is scaled
+    by the size of its target-side terms so neither dominates by units alone.
+    """
+    d_t, d_s = f_t.shape[0], f_s.shape[0]
+    n_m = d_t * d_s
+    # vec is row-major: M.ravel()[i * d_s + j] = M[i, j].
+    sylvester = np.kron(f_t, np.eye(d_s)) - np.kron(np.eye(d_t), f_s.T)  # vec(F_T M - M F_S)
+    rows = [np.hstack([sylvester, np.zeros((n_m, d_t))]) / max(np.linalg.norm(f_t), 1e-12)]
+    rhs = [np.zeros(n_m)]
+    scale = max(np.linalg.norm(e_t), 1e-12)
+    for es, et in zip(e_s, e_t):
+        rows.append(np.hstack([np.kron(np.eye(d_t), es[None, :]), -f_t]) / scale)
+        rhs.append(et / scale)
+    solution, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+    return solution[:n_m].reshape(d_t, d_s), solution[n_m:]
+
+
+def _wrap(increments: np.ndarray, periodic: np.ndarray | None) -> np.ndarray:
+    """Increments with the angle coordinates (``periodic``) wrapped into [-pi, pi)."""
+    if periodic is None:
+        return increments
+    wrapped = increments.copy()
+    wrapped[:, periodic] = (wrapped[:, periodic] + np.pi) % (2.0 * np.pi) - np.pi
+    return wrapped
+
+
+def _periodic_mask(periodic, dim: int, name: str) -> np.ndarray | None:
+    if periodic is None:
+        return None
+    mask = np.asarray(periodic, dtype=bool).ravel()
+    if mask.shape != (dim,):
+        raise ValueError(f"{name} must hold one flag per state coordinate ({dim}), got {len(mask)}")
+    return mask
+
+
+def dynamics_consistency(
+    mapping: Mapping, target: Transitions, source_step: SourceStep, scale: np.ndarray | None = None,
+    rate: float | None = 1.0, source_periodic=None, target_periodic=None,
+) -> float:
+    """How well the source simulator, seen through the mapping, predicts target transitions.
+
+    The mean squared difference, per coordinate, between the target increment
+    ``s'_T - s_T`` and ``rate`` times the mapped source increment
+    ``chi(x + P_S(x, a) - x) - chi(x)`` with ``x = chi_plus(s_T)`` (actions matched
+    by index; increments of the coordinates flagged ``*_periodic`` wrapped into
+    [-pi, pi)). Each coordinate is divided by ``scale`` (default: the standard
+    deviation of the target's increments), so 1.0 is as good as predicting "no
+    change". ``rate`` is how many source steps one target step spans; None fits it
+    (least squares, >= 0), since two domains' control steps need not cover the
+    same stretch of their motion and a state map cannot absorb that.
+    """
+    x = mapping.chi_plus(target.states)
+    source_mask = _periodic_mask(source_periodic, x.shape[1], "source_periodic")
+    target_mask = _periodic_mask(target_periodic, target.state_dim, "target_periodic")
+    mapped = mapping.chi(x + _wrap(source_step(x, target.actions) - x, source_mask)) - mapping.chi(x)
+    observed = _wrap(target.next_states - target.states, target_mask)
+    scale = np.maximum(observed.std(axis=0) if scale is None else np.asarray(scale, np.float64), 1e-12)
+    mapped, observed = mapped / scale, observed / scale
+    if rate is None:
+        rate = max(float(np.sum(mapped * observed) / max(np.sum(mapped * mapped), 1e-300)), 0.0)
+    return float(np.mean((observed - rate * mapped) ** 2))
+
+
+def align_transitions(
+    source: Transitions,
+    target: Transitions,
+    source_actions: np.ndarray,
+    target_actions: np.ndarray,
+    n_neighbors: int = 8,
+    mu: float = 1.0,
+    rng: np.random.Generator | None = None,
+    source_step: SourceStep | None = None,
+    max_samples: int = 1500,
+    rates: tuple[float, ...] = tuple(np.geomspace(0.125, 8.0, 13)),
+    source_periodic=None,
+    target_periodic=None,
+) -> AffineMapping:
+    """A state mapping from random transitions of both tasks, chosen by dynamics consistency.
+
+    State samples alone leave a map defined only up to the symmetries of the
+    sample clouds (a random policy's data are symmetric: s and -s are equally
+    likely), so :func:`align_manifolds` cannot tell chi from -chi. The dynamics
+    can: with actions matched by index (the paper's Assumption 1), a map that
+    flips the sign of the state also has to flip the effect of each action.
+    Ammar et al. (AAAI 2015) therefore align (s, a, s') triplets; here the
+    triplets choose among candidate state maps by dynamics consistency (the
+    source simulator, seen through the map, should reproduce the target's
+    transitions, as TA-TL's Algorithm 1 assumes when it queries it):
+
+    1. Standardise each side's states (centre, whiten) as :func:`align_manifolds`.
+    2. Candidates: (a) the state-only alignment with each shared coordinate's sign
+       flipped (all 2^d combinations: the ambiguities local geometry cannot
+       resolve); (b) for each time-rate factor in ``rates`` (target steps per
+       source step), the affine map that makes the two tasks' least-squares
+       linear increment models agree (:func:`_consistent_map`).
+    3. Keep the candidate with the least :func:`dynamics_consistency` (rate fitted)
+       on the target transitions: the source step (``source_step``, e.g. the source simulator;
+       default: the source's fitted linear model) from ``chi_plus(s_T)`` under the
+       same action index, mapped back by ``chi``, should land on ``s'_T``.
+
+    Args:
+      source, target: random-policy transitions of each task.
+      source_actions, target_actions: (n, ...) each task's discrete action set;
+        they must have the same number of actions (matched by index).
+      n_neighbors, mu, rng, max_samples: as in :func:`align_manifolds` (for the
+        state-only candidates, and rng draws subsamples of larger sets).
+      source_step: batched source step (N, dS), (N,) action indices -> (N, dS).
+      rates: the time-rate factors tried for the model-consistent candidates.
+      source_periodic, target_periodic: optional per-coordinate flags of angles,
+        whose increments are wrapped into [-pi, pi) (a pendulum passing +-pi).
+
+    Returns:
+      An :class:`AffineMapping` on states (chi: source -> target).
+    """
+    for name, value in (("source", source), ("target", target)):
+        if not isinstance(value, Transitions):
+            raise ValueError(f"{name} must be a Transitions batch, got {type(value).__name__}")
+    n_actions = len(np.asarray(source_actions))
+    if n_actions != len(np.asarray(target_actions)) or n_actions < 2:
+        raise ValueError(
+            "source_actions and target_actions must have the same number (>= 2) of actions "
+            f"(Assumption 1: matched by index), got {n_actions} and {len(np.asarray(target_actions))}"
+        )
+    for name, value in (("source", source), ("target", target)):
+        if value.actions.min() < 0 or value.actions.max() >= n_actions:
+            raise ValueError(f"{name}.actions must index the {n_actions} actions (0..{n_actions - 1})")
+    periodic = (_periodic_mask(source_periodic, source.state_dim, "source_periodic"),
+                _periodic_mask(target_periodic, target.state_dim, "target_periodic"))
+    # Unwrapped next states, so increments are the motion (not a 2 pi jump).
+    source, target = (
+        dataclasses.replace(t, next_states=t.states + _wrap(t.next_states - t.states, mask))
+        for t, mask in zip((source, target), periodic)
+    )
+    rng = rng if rng is not None else np.random.default_rng(0)
+    if len(source) > max_samples:
+        source = _subset(source, rng.choice(len(source), max_samples, replace=False))
+    if len(target) > max_samples:
+        target = _subset(target, rng.choice(len(target), max_samples, replace=False))
+
+    mean_s, white_s = _standardiser(source.states, "source.states", True)
+    mean_t, white_t = _standardiser(target.states, "target.states", True)
+    unwhite_s, unwhite_t = np.linalg.inv(white_s), np.linalg.inv(white_t)
+
+    def to_states(m_z: np.ndarray, o_z: np.ndarray) -> AffineMapping:
+        # z_T = m_z z_S + o_z, with z = (s - mean) @ W.T, written in state units.
+        matrix = unwhite_t @ m_z @ white_s
+        return AffineMapping(matrix, mean_t + unwhite_t @ o_z - matrix @ mean_s)
+
+    def standardised(t: Transitions, mean, white):
+        return (t.states - mean) @ white.T, (t.next_states - mean) @ white.T
+
+    zs, zs_next = standardised(source, mean_s, white_s)
+    zt, zt_next = standardised(target, mean_t, white_t)
+    f_s, e_s = _increment_model(zs, zs_next, source.actions, n_actions)
+    f_t, e_t = _increment_model(zt, zt_next, target.actions, n_actions)
+
+    candidates = [to_states(*_consistent_map(rate * f_s, rate * e_s, f_t, e_t)) for rate in rates]
+    states_only = align_manifolds(
+        source.states, target.states, n_neighbors=n_neighbors, mu=mu, rng=rng, max_samples=max_samples,
+    )
+    # Flipping shared coordinate k on one side only (alpha's column k) composes chi with
+    # a reflection: chi_z = pinv(beta^T) diag(signs) alpha^T. All signs +1 is the original.
+    d_shared = states_only.alpha.shape[1]
+    if d_shared <= 6:  # 2^d candidates
+        for signs in itertools.product((1.0, -1.0), repeat=d_shared):
+            m_z = np.linalg.pinv(states_only.beta.T) @ (np.asarray(signs)[:, None] * states_only.alpha.T)
+            candidates.append(_through(states_only, m_z))
+
+    if source_step is None:
+        def source_step(states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+            z = (states - mean_s) @ white_s.T
+            return (z + z @ f_s.T + e_s[actions]) @ unwhite_s.T + mean_s
+
+    scores = []
+    for candidate in candidates:
+        try:
+            scores.append(dynamics_consistency(candidate, target, source_step, rate=None,
+                                               source_periodic=periodic[0], target_periodic=periodic[1]))
+        except ValueError:  # e.g. a mapped state the source simulator rejects
+            scores.append(np.inf)
+    return candidates[int(np.argmin(scores))]
+
+
 __all__ = [
     "AffineMapping", "IdentityMapping", "LinearAlignment", "Mapping", "align_manifolds",
-    "correspondences", "local_geometry",
+    "align_transitions", "correspondences", "dynamics_consistency", "local_geometry",
 ]
