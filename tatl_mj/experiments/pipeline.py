@@ -28,7 +28,7 @@ import numpy as np
 
 from tatl_mj import sampling, suite
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side
-from tatl_mj.transfer import alignment, apprentice, features, fqi, method
+from tatl_mj.transfer import alignment, features, fqi, method
 from tatl_mj.transitions import Transitions
 
 

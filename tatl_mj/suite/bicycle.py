@@ -119,12 +119,9 @@ class BicycleParams:
 
 def model_xml(params: BicycleParams | None = None) -> tuple[str, dict[str, bytes]]:
     """The MJCF text (with ``params`` written in) and its include files."""
-    xml, assets = common.read_model("bicycle.xml")
     if params is None:
-        return xml, assets
-    if not isinstance(params, BicycleParams):
-        raise ValueError(f"params must be a BicycleParams, got {type(params).__name__}")
-    root = ET.fromstring(xml)
+        return common.read_model("bicycle.xml")
+    root, assets = common.parse_model("bicycle.xml", params, BicycleParams)
     root.find("option").set("gravity", f"0 0 {-params.gravity!r}")
     # Frame and rider share the rear body's centre of mass; inertia splits with mass.
     inertia = np.array([9.2, 11.0, 2.8, 0.0, -2.4, 0.0])

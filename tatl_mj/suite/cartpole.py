@@ -72,12 +72,9 @@ class CartPoleParams:
 
 def model_xml(params: CartPoleParams | None = None) -> tuple[str, dict[str, bytes]]:
     """The MJCF text (with ``params`` written in) and its include files."""
-    xml, assets = common.read_model("cartpole.xml")
     if params is None:
-        return xml, assets
-    if not isinstance(params, CartPoleParams):
-        raise ValueError(f"params must be a CartPoleParams, got {type(params).__name__}")
-    root = ET.fromstring(xml)
+        return common.read_model("cartpole.xml")
+    root, assets = common.parse_model("cartpole.xml", params, CartPoleParams)
     m, l = params.pole_mass, params.pole_half_length
     rod_inertia = m * l * l / 3.0  # uniform rod of length 2l about its centre
     root.find("option").set("gravity", f"0 0 {-params.gravity!r}")

@@ -36,6 +36,19 @@ def read_model(filename: str) -> tuple[str, dict[str, bytes]]:
     return path.read_text(), assets
 
 
+def parse_model(filename: str, params: Any, params_type: type) -> tuple[Any, dict[str, bytes]]:
+    """An MJCF file as an ElementTree root to write ``params`` into, and its includes.
+
+    Raises ValueError when ``params`` is not a ``params_type``.
+    """
+    import xml.etree.ElementTree as ET
+
+    if not isinstance(params, params_type):
+        raise ValueError(f"params must be a {params_type.__name__}, got {type(params).__name__}")
+    xml, assets = read_model(filename)
+    return ET.fromstring(xml), assets
+
+
 # --- Physical parameters ------------------------------------------------------
 
 def positive(default: float, doc: str = "") -> Any:

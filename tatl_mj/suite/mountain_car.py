@@ -126,12 +126,8 @@ class MountainCarParams:
 
 def model_xml(params: MountainCarParams | None = None) -> tuple[str, dict[str, bytes]]:
     """The MJCF text (with ``params`` written in) and its include files."""
-    xml, assets = common.read_model("mountain_car.xml")
-    if params is None:
-        params = MountainCarParams()
-    if not isinstance(params, MountainCarParams):
-        raise ValueError(f"params must be a MountainCarParams, got {type(params).__name__}")
-    root = ET.fromstring(xml)
+    params = MountainCarParams() if params is None else params
+    root, assets = common.parse_model("mountain_car.xml", params, MountainCarParams)
     _pose_wall(root)
     root.find("option").set("gravity", f"0 0 {-params.gravity!r}")
     root.find(".//geom[@name='wheel']").set("mass", repr(params.car_mass))

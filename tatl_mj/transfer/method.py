@@ -149,6 +149,20 @@ class TATL:
         return DiscreteTATLPolicy(**common) if problem.target_discrete else TATLPolicy(**common)
 
 
+def _target_fqi(problem: TransferProblem, target_samples: Transitions, initial: Mapping | None) -> Policy:
+    """Target FQI on ``target_samples`` (from the mapped source Q when ``initial`` is a mapping)."""
+    regressor = make_regressor(problem.regressor, target_samples.state_dim)
+    rng = np.random.default_rng(problem.seed)
+    if initial is None:
+        q = rl(target_samples, problem.n_actions, regressor, problem.gamma, problem.iterations, rng=rng)
+    else:
+        q = uma_tl(
+            problem.source_q, initial, target_samples, problem.n_actions, regressor,
+            problem.gamma, problem.iterations, rng=rng,
+        )
+    return GreedyPolicy(q, problem.target_actions, problem.target_discrete)
+
+
 @dataclasses.dataclass(frozen=True)
 class UMATL:
     """UMA-TL: target FQI initialised with the mapped source Q (Ammar et al. 2015)."""
@@ -156,12 +170,7 @@ class UMATL:
     name: str = "uma-tl"
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        regressor = make_regressor(problem.regressor, target_samples.state_dim)
-        q = uma_tl(
-            problem.source_q, problem.mapping, target_samples, problem.n_actions, regressor,
-            problem.gamma, problem.iterations, rng=np.random.default_rng(problem.seed),
-        )
-        return GreedyPolicy(q, problem.target_actions, problem.target_discrete)
+        return _target_fqi(problem, target_samples, problem.mapping)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,12 +180,7 @@ class RL:
     name: str = "rl"
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        regressor = make_regressor(problem.regressor, target_samples.state_dim)
-        q = rl(
-            target_samples, problem.n_actions, regressor, problem.gamma, problem.iterations,
-            rng=np.random.default_rng(problem.seed),
-        )
-        return GreedyPolicy(q, problem.target_actions, problem.target_discrete)
+        return _target_fqi(problem, target_samples, None)
 
 
 METHODS: dict[str, TransferMethod] = {"ta-tl": TATL(), "uma-tl": UMATL(), "rl": RL()}
