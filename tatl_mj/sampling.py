@@ -138,6 +138,23 @@ class _Simulator:
         # dm_control's own float expression, so that the count matches exactly.
         return time_limit / (self.physics.timestep() * self.n_sub)
 
+    def place(self, batch: mujoco.batch.Batch, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Puts simulations ``ids`` at a fresh reset's state with these qpos and qvel.
+
+        ctrl is left as reset leaves it: ``advance`` writes it before every step.
+        """
+        batch.state[ids] = self.blank_row
+        batch.bind("qpos")[ids] = qpos
+        batch.bind("qvel")[ids] = qvel
+
+    def start_episodes(self, batch: mujoco.batch.Batch, ids: np.ndarray, env: Any) -> None:
+        """Puts simulations ``ids`` at the starts of ``env``'s next ``len(ids)`` episodes.
+
+        One call of the task's ``start_configurations`` draws what as many
+        successive resets of ``env`` would.
+        """
+        self.place(batch, ids, *env.task.start_configurations(env.physics, len(ids)))
+
     def advance(
         self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray, first: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -311,18 +328,20 @@ def collect(
         running = episodes.lengths[slot_episode[slot_episode >= 0]]
         total = episodes.total()
         supply = total + np.maximum(expected - running, 1.0).sum()
-        n_live = len(running)
-        for slot in free:
+        n_live, n_start = len(running), 0
+        for _ in free:
             # A few episodes at least while transitions are missing, so that the
             # threads have work at once; none once n are recorded (termination).
             if total >= n or (supply >= n and n_live >= _MIN_LIVE):
                 break
-            with physics.reset_context():
-                task_obj.initialize_episode(physics)
-            mujoco.mj_getState(sim.model, physics.data.ptr, batch.state[slot], _INTEGRATION)
-            slot_episode[slot] = episodes.start()
             supply += expected
             n_live += 1
+            n_start += 1
+        if n_start:
+            starts = free[:n_start]
+            sim.start_episodes(batch, starts, env)
+            for slot in starts:
+                slot_episode[slot] = episodes.start()
         live = np.flatnonzero(slot_episode >= 0)
         if len(live) == 0:
             break
@@ -433,10 +452,7 @@ def step_from(
         return s.copy()
     batch = sim.query_batch(len(s))
     ids = np.arange(len(s))
-    batch.state[ids] = sim.blank_row
-    qpos, qvel = sim.physics.qpos_qvel_from(s)
-    batch.bind("qpos")[ids] = qpos
-    batch.bind("qvel")[ids] = qvel
+    sim.place(batch, ids, *sim.physics.qpos_qvel_from(s))
     controls = env.task.controls(sim.actions[a], np.random.RandomState(0))
     next_states, diverged = sim.advance(batch, ids, controls, np.ones(len(ids), bool))
     next_states[diverged] = s[diverged]
@@ -489,10 +505,7 @@ def evaluate(
     action_dim = sim.action_dim
     batch = sim.new_batch(n_episodes)
     ids = np.arange(n_episodes)
-    for i in ids:
-        with physics.reset_context():
-            task_obj.initialize_episode(physics)
-        mujoco.mj_getState(sim.model, physics.data.ptr, batch.state[i], _INTEGRATION)
+    sim.start_episodes(batch, ids, env)
     qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
     returns = np.zeros(n_episodes)
     lengths = np.zeros(n_episodes, np.int64)

@@ -228,7 +228,7 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     assert paths == {"dm_control", "sampler", "rollout"}
     summary = records[-1]
     assert summary["kind"] == "summary"
-    for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s"):
+    for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s", "rollout_vs_dm_control"):
         assert summary[key] > 0
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2

@@ -366,15 +366,15 @@ class Task(common.StateTask):
         rider = random.uniform(-self.cg_noise, self.cg_noise, size=n)
         return np.column_stack([torque[:, 0], rider, np.full(n, self.speed)])
 
+    def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
+        physics.set_target_speed(self.speed)  # qpos_qvel_from reads it
+        states = np.zeros((n, Physics.STATE_SIZE))
+        states[:, 2] = self.random.uniform(-START_ROLL, START_ROLL, size=n)
+        return physics.qpos_qvel_from(states)
+
     def initialize_episode(self, physics: Physics) -> None:
-        physics.set_target_speed(self.speed)
-        state = np.array([0.0, 0.0, self.random.uniform(-START_ROLL, START_ROLL), 0.0])
-        qpos, qvel = physics.qpos_qvel_from(state[None])
-        # dm_control already runs this inside physics.reset_context().
-        physics.data.qpos[:] = qpos[0]
-        physics.data.qvel[:] = qvel[0]
-        physics.data.ctrl[:] = [0.0, 0.0, self.speed]
         super().initialize_episode(physics)
+        physics.data.ctrl[:] = [0.0, 0.0, self.speed]
 
     def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
         return np.abs(np.asarray(states, np.float64)[:, 2]) > ROLL_LIMIT

@@ -126,13 +126,10 @@ class Physics(common.StatePhysics):
 class Task(common.StateTask):
     """Keep the pole within 12 degrees of upright and the cart within 2.4 m."""
 
-    def initialize_episode(self, physics: Physics) -> None:
-        state = self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH, size=Physics.STATE_SIZE)
-        qpos, qvel = physics.qpos_qvel_from(state[None])
-        # dm_control already runs this inside physics.reset_context().
-        physics.data.qpos[:] = qpos[0]
-        physics.data.qvel[:] = qvel[0]
-        super().initialize_episode(physics)
+    def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
+        # Row-major: the same draws, in the same order, as n draws of one state.
+        states = self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH, size=(n, Physics.STATE_SIZE))
+        return physics.qpos_qvel_from(states)
 
     def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
         s = np.asarray(states, np.float64)

@@ -146,11 +146,25 @@ class StateTask(base.Task):
       (a failure or the goal);
     - ``controls(action_values, random) -> (N, nu)``: the full ``ctrl`` vector for
       actions ``(N, action_dim)`` (adds e.g. servo set-points or rider noise);
+    - ``start_configurations(physics, n) -> (n, nq), (n, nv)``: where ``n``
+      successive episodes start, drawn from ``self.random`` exactly as ``n``
+      resets would draw them; ``initialize_episode`` is this with ``n = 1``,
+      and the sampler starts many episodes with one call;
     - ``rollout_compatible``: False when the model itself changes during an
       episode (the time-varying pendulum), so the sampler must step the env.
     """
 
     rollout_compatible: bool = True
+
+    def start_configurations(self, physics: StatePhysics, n: int) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def initialize_episode(self, physics: StatePhysics) -> None:
+        qpos, qvel = self.start_configurations(physics, 1)
+        # dm_control already runs this inside physics.reset_context().
+        physics.data.qpos[:] = qpos[0]
+        physics.data.qvel[:] = qvel[0]
+        super().initialize_episode(physics)
 
     def get_observation(self, physics: StatePhysics) -> collections.OrderedDict:
         return collections.OrderedDict(state=physics.state_vector())

@@ -261,12 +261,9 @@ def make_physics(params: MountainCarParams | None = None) -> Physics:
 class Climb(common.StateTask):
     """Reach x >= 0.5 (absorbing); reward ``-(x - 0.5)^2`` every step."""
 
-    def initialize_episode(self, physics: Physics) -> None:
-        x = self.random.uniform(*START_RANGE)
-        qpos, qvel = physics.qpos_qvel_from(np.array([[x, 0.0]]))
-        physics.data.qpos[:] = qpos[0]
-        physics.data.qvel[:] = qvel[0]
-        super().initialize_episode(physics)
+    def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
+        x = self.random.uniform(*START_RANGE, size=n)
+        return physics.qpos_qvel_from(np.column_stack([x, np.zeros(n)]))
 
     def batch_reward(self, states: np.ndarray) -> np.ndarray:
         return -((states[:, 0] - GOAL_X) ** 2)

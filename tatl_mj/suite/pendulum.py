@@ -171,15 +171,16 @@ class Task(common.StateTask):
         self.rollout_compatible = not timevarying
         self.step_index = 0
 
+    def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
+        # Per episode theta then theta_dot, as n pairs of scalar draws; the hinge
+        # angle is pi + u itself, not the wrapped paper angle.
+        draws = self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH, size=(n, 2))
+        return np.pi + draws[:, :1], draws[:, 1:].copy()
+
     def initialize_episode(self, physics: Physics) -> None:
         self.step_index = 0
         if self.timevarying:
             physics.set_pendulum(*timevarying_schedule(0, self.params))
-        theta = np.pi + self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH)
-        theta_dot = self.random.uniform(-START_HALF_WIDTH, START_HALF_WIDTH)
-        # dm_control already runs this inside physics.reset_context().
-        physics.data.qpos[0] = theta
-        physics.data.qvel[0] = theta_dot
         super().initialize_episode(physics)
 
     def before_step(self, action: Any, physics: Physics) -> None:
