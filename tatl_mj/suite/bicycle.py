@@ -76,6 +76,9 @@ DEFAULT_TIME_LIMIT = 1000.0  # s, the paper's
 DEFAULT_SPEED = 2.778  # m/s, 10 km/h
 DEFAULT_CG_NOISE = 0.02  # m
 ROLL_LIMIT = math.pi / 15  # rad, 12 degrees
+_PITCH_TOLERANCE = 1e-14  # rad, last Newton step of frame_pitch
+_PITCH_DELTA = 1e-6  # rad, central difference for its slope
+_PITCH_MAX_ITERATIONS = 50
 START_ROLL = math.radians(1.0)  # rad, start roll uniform in +-START_ROLL
 MAX_CG_NOISE = 0.25  # m, the rider servo's range
 TORQUE_LIMIT = 2.0  # N m
@@ -198,11 +201,26 @@ def frame_pitch(roll: np.ndarray, steer: np.ndarray) -> np.ndarray:
     shape = roll.shape
     roll, steer = roll.ravel(), steer.ravel()
 
-    def height(pitch: np.ndarray) -> np.ndarray:
-        return _front_points(roll, pitch, steer)["front_contact"][:, 2]
+    def height(r: np.ndarray, p: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return _front_points(r, p, s)["front_contact"][:, 2]
 
-    pitch = optimize.newton(height, np.zeros_like(roll), tol=1e-14, maxiter=50)
-    return np.asarray(pitch, np.float64).reshape(shape)
+    # Newton's method, each entry stopped as soon as it has converged, so that
+    # an entry's pitch does not depend on the others in the batch (a batched
+    # scipy.optimize.newton iterates every entry until all have converged, which
+    # moves the last bits): the sampler's many starts then equal single resets.
+    pitch = np.zeros_like(roll)
+    active = np.arange(len(roll))
+    for _ in range(_PITCH_MAX_ITERATIONS):
+        if not len(active):
+            break
+        r, p, s = roll[active], pitch[active], steer[active]
+        slope = (height(r, p + _PITCH_DELTA, s) - height(r, p - _PITCH_DELTA, s)) / (2 * _PITCH_DELTA)
+        step = height(r, p, s) / slope
+        pitch[active] = p - step
+        active = active[np.abs(step) > _PITCH_TOLERANCE]
+    if len(active):
+        raise RuntimeError(f"frame pitch did not converge for roll {roll[active]}, steer {steer[active]}")
+    return pitch.reshape(shape)
 
 
 class Physics(common.StatePhysics):
