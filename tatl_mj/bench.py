@@ -4,7 +4,8 @@ One process, one measurement after another, for cart-pole, pendulum, mountain
 car and bicycle:
 
 - ``dm_control``: a Python loop over the environment's ``step`` with random
-  actions (resetting at episode ends), the way a hand-written collector works;
+  actions (resetting at episode ends), the way a hand-written collector works,
+  also given as simulated seconds per wall-clock second (``real_time_factor``);
 - ``sampler``: :func:`tatl_mj.sampling.collect`, whole random episodes in
   lockstep on ``--threads`` MuJoCo threads, task logic included;
 - ``rollout``: raw ``mujoco.rollout`` of the bare model, open loop, no task
@@ -107,7 +108,11 @@ def time_dm_control(domain: str, task: str, seconds: float, seed: int = 0) -> di
         steps += 100
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
-            return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed}
+            return {
+                "steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed,
+                # simulated seconds per wall-clock second
+                "real_time_factor": steps * env.control_timestep() / elapsed,
+            }
 
 
 def time_sampler(domain: str, task: str, seconds: float, threads: int, seed: int = 0) -> dict[str, Any]:
@@ -286,8 +291,9 @@ def run(args: argparse.Namespace) -> int:
 def _print_record(record: dict[str, Any]) -> None:
     kind = record["kind"]
     if kind == "steps":
+        real_time = f", {record['real_time_factor']:.0f}x real time" if "real_time_factor" in record else ""
         print(f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
-              f"({record['steps']} steps in {record['seconds']:.2f} s)")
+              f"({record['steps']} steps in {record['seconds']:.2f} s{real_time})")
     elif "skipped" in record:
         print(f"{kind}: skipped ({record['skipped']})")
     elif kind == "fqi":

@@ -113,7 +113,7 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path, monkeypatch):
 
 
 def test_ray_executor_matches_local(tmp_path):
-    pytest.importorskip("ray", reason="Ray is the optional extra tatl-mj[ray]")
+    # Ray is the optional extra tatl-mj[ray]; scripts/setup.sh installs it for the tests.
     spec = tiny_spec()
     local = runner.run([spec], "tiny", [0], tmp_path / "local", workers=1, progress=False)
     distributed = runner.run([spec], "tiny", [0], tmp_path / "ray", workers=2, executor="ray", progress=False)

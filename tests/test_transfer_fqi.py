@@ -162,7 +162,7 @@ def test_make_regressor_from_spec():
 def test_time_fqi_reports_a_run():
     result = time_fqi(n=3_000, iterations=3)
     assert result["n_transitions"] == 3_000 and result["n_features"] == 21
-    assert 0 < result["fqi_seconds"] < 30
+    assert np.isfinite(result["fqi_seconds"]) and result["fqi_seconds"] > 0  # speed is `tatl bench`'s
 
 
 def test_make_regressor_accepts_a_learner_section_with_both_seed_and_features():

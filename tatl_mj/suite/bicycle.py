@@ -25,8 +25,9 @@ Control vector     ``ctrl = [steer torque (N m), rider shift set-point (m,
                    fills in the last two (``Task.controls``).
 Rider noise        every control step the rider's centre of gravity is sent
                    to a sideways offset uniform in +-``cg_noise`` (default
-                   0.02 m) drawn from the task's ``random``; a stiff position
-                   servo (10 Hz, critically damped) moves the 60 kg rider.
+                   0.02 m) drawn from the task's ``random`` (nothing is
+                   drawn when ``cg_noise = 0``); a stiff position servo
+                   (10 Hz, critically damped) moves the 60 kg rider.
 Reward             +1 for every step that ends upright, 0 on the step that
                    ends in a fall (as the cart-pole source task), so the
                    return counts control steps balanced (x 0.01 s = the
@@ -381,7 +382,9 @@ class Task(common.StateTask):
     def controls(self, action_values: np.ndarray, random: Any) -> np.ndarray:
         torque = np.asarray(action_values, np.float64).reshape(-1, 1)
         n = len(torque)
-        rider = random.uniform(-self.cg_noise, self.cg_noise, size=n)
+        # No noise, no draws: start states then do not depend on how many
+        # steps were taken between resets (the sampler's lockstep episodes).
+        rider = random.uniform(-self.cg_noise, self.cg_noise, size=n) if self.cg_noise else np.zeros(n)
         return np.column_stack([torque[:, 0], rider, np.full(n, self.speed)])
 
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
