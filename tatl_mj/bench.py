@@ -56,8 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _check(args: argparse.Namespace) -> list[str]:
     domains = [d for d in str(args.domains).split(",") if d]
     unknown = sorted(set(domains) - set(DOMAINS))
-    if unknown or not domains:
-        raise ValueError(f"--domains: unknown {unknown or domains}; valid: {sorted(DOMAINS)}")
+    if not domains:
+        raise ValueError(f"--domains: none given; valid: {sorted(DOMAINS)}")
+    if unknown:
+        raise ValueError(f"--domains: unknown {unknown}; valid: {sorted(DOMAINS)}")
     if args.threads < 1:
         raise ValueError(f"--threads must be >= 1, got {args.threads}")
     if not args.seconds > 0:

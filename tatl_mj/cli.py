@@ -99,7 +99,12 @@ def _methods(text: str) -> dict:
 def _plot(args: argparse.Namespace) -> int:
     from tatl_mj.experiments import plot
 
-    for path in plot.plot(args.dir):
+    try:
+        paths = plot.plot(args.dir)
+    except FileNotFoundError as error:
+        print(f"tatl plot: {error}", file=sys.stderr)
+        return 2
+    for path in paths:
         print(f"wrote {path}")
     return 0
 
@@ -107,10 +112,15 @@ def _plot(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     from tatl_mj.experiments import clips
 
-    path = clips.render_from_spec(
-        args.spec, method=args.method, seed=args.seed, out=args.out, seconds=args.seconds, width=args.width,
-        height=args.height, fps=args.fps, preset=args.preset, run_dir=args.run_dir, with_source=args.with_source,
-    )
+    try:
+        path = clips.render_from_spec(
+            args.spec, method=args.method, seed=args.seed, out=args.out, seconds=args.seconds,
+            width=args.width, height=args.height, fps=args.fps, preset=args.preset, run_dir=args.run_dir,
+            with_source=args.with_source,
+        )
+    except (ValueError, FileNotFoundError) as error:  # SpecError is a ValueError
+        print(f"tatl render: {error}", file=sys.stderr)
+        return 2
     print(f"wrote {path}")
     return 0
 
@@ -162,12 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_render)
 
     p = sub.add_parser("bench", help="throughput of sampling paths, FQI and rendering")
-    try:
-        from tatl_mj import bench
+    from tatl_mj import bench  # imports neither mujoco nor dm_control
 
-        bench.add_arguments(p)
-    except ImportError:  # bench.py not landed in this checkout
-        pass
+    bench.add_arguments(p)
     p.set_defaults(func=_bench)
     return parser
 
@@ -193,7 +200,12 @@ def main(argv: list[str] | None = None) -> int:
         # MUJOCO_GL setting must not stop them (worker processes inherit this).
         os.environ["MUJOCO_GL"] = "disable"
         os.environ.pop("PYOPENGL_PLATFORM", None)
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except BrokenPipeError:
+        # The reader went away (`tatl list | head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":

@@ -236,12 +236,17 @@ def _check_indices(indices: Any, n: int, n_actions: int) -> np.ndarray:
     return a.astype(np.int64, copy=False)
 
 
-def _check_values(values: Any, n: int, action_dim: int) -> np.ndarray:
+def _check_values(values: Any, n: int, sim: _Simulator) -> np.ndarray:
     v = np.asarray(values, np.float64)
-    if v.shape == (n,) and action_dim == 1:
+    if v.shape == (n,) and sim.action_dim == 1:
         v = v[:, None]
-    if v.shape != (n, action_dim):
-        raise ValueError(f"policy must return ({n}, {action_dim}) action values, got {v.shape}")
+    if v.shape != (n, sim.action_dim):
+        if np.issubdtype(sim.actions.dtype, np.integer):  # the grid world: actions are indices
+            raise ValueError(
+                f"policy must return ({n},) action indices in 0..{len(sim.actions) - 1} "
+                f"for {sim.domain}, got shape {v.shape}"
+            )
+        raise ValueError(f"policy must return ({n}, {sim.action_dim}) action values, got {v.shape}")
     return v
 
 
@@ -502,7 +507,6 @@ def evaluate(
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
     env = sim.make_env(seed)
     physics, task_obj = env.physics, env.task
-    action_dim = sim.action_dim
     batch = sim.new_batch(n_episodes)
     ids = np.arange(n_episodes)
     sim.start_episodes(batch, ids, env)
@@ -512,7 +516,7 @@ def evaluate(
     live = ids
     while len(live):
         states = physics.states_from(qpos[live], qvel[live])
-        values = _check_values(policy(states), len(live), action_dim)
+        values = _check_values(policy(states), len(live), sim)
         controls = task_obj.controls(values, task_obj.random)
         next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
         rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
@@ -529,12 +533,11 @@ def _evaluate_env(
     """Lockstep over one environment per episode, seeded ``(seed, i)``."""
     envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
     states = np.stack([_observed_state(e.reset()) for e in envs])
-    action_dim = sim.action_dim
     returns = np.zeros(n_episodes)
     lengths = np.zeros(n_episodes, np.int64)
     live = np.arange(n_episodes)
     while len(live):
-        values = _check_values(policy(states[live]), len(live), action_dim)
+        values = _check_values(policy(states[live]), len(live), sim)
         still = []
         for j, i in enumerate(live):
             timestep = envs[i].step(values[j])

@@ -66,6 +66,12 @@ def test_run_with_a_plugin_method(tmp_path):
     assert set(methods) == {"rl", "zero"}
     bad = tatl("run", str(spec), "--preset", "tiny", "--out", str(out), "--methods", "ta-tl,nope:Missing")
     assert bad.returncode == 2 and "cannot import 'nope:Missing'" in bad.stderr
+    # A discrete target (the grid world): the plug-in's policy returns action indices.
+    grid = tatl("run", "tasks/grid_to_windy.toml", "--seeds", "1", "--workers", "1", "--out", str(tmp_path / "grid"),
+                "--methods", "plugin_method:ZeroTorque", env=env)
+    assert grid.returncode == 0, grid.stderr
+    zero = json.loads((tmp_path / "grid" / "summary.json").read_text())["experiments"]["grid_to_windy"]["methods"]
+    assert np.isfinite(zero["zero"]["final_return"])
 
 
 def test_render_random_grid_world_clip(tmp_path):

@@ -219,6 +219,11 @@ def test_unknown_names_and_bad_states_raise():
         sampling.step_from("cartpole", "balance", np.zeros((2, 3)), np.zeros(2, int))
     with pytest.raises(ValueError, match="action indices"):
         sampling.step_from("cartpole", "balance", np.zeros((2, 4)), np.array([0, 5]))
+    with pytest.raises(ValueError, match=r"\(3, 1\) action values"):
+        sampling.evaluate("cartpole", "balance", lambda s: np.zeros((len(s), 2)), 3, seed=0)
+    # The grid world's actions are indices, not moves: the message says so.
+    with pytest.raises(ValueError, match=r"\(3,\) action indices in 0..3 for gridworld"):
+        sampling.evaluate("gridworld", "windy", lambda s: np.zeros((len(s), 2)), 3, seed=0, max_episode_steps=5)
 
 
 def test_bench_prints_json_lines_with_the_summary_last(capsys):

@@ -157,6 +157,11 @@ def test_load_rejects_unknown_names_listing_the_valid_ones():
         suite.load("gridworld", "windy", task_kwargs={"colour": "red"})
     with pytest.raises(ValueError, match="unknown task_kwargs.*'colour'.*valid.*time_limit"):
         suite.load("mountain_car", "climb", task_kwargs={"colour": "red"})
+    for bad in ("abc", -1, 1.5):
+        with pytest.raises(ValueError, match=r"task_kwargs\['random'\] must be None, an integer seed"):
+            suite.load("cartpole", "balance", task_kwargs={"random": bad})
+    for good in (None, 3, [3, 1], np.random.RandomState(3)):  # what dm_control accepts
+        suite.load("gridworld", "plain", task_kwargs={"random": good}).reset()
 
 
 @pytest.mark.parametrize("domain", sorted(suite.DOMAINS))

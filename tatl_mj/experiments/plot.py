@@ -136,6 +136,8 @@ def table(summary: dict) -> str:
                 samples = _fmt(data["samples_to_threshold"])
                 if m == "ta-tl":
                     ratio = "-"
+                elif math.isinf(ta_median) and math.isinf(median):
+                    ratio = "neither (median seed) reached it"
                 elif math.isinf(ta_median):
                     ratio = "TA-TL (median seed) never reached it"
                 elif math.isinf(median):

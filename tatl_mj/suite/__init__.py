@@ -67,6 +67,15 @@ def load(
         raise ValueError(
             f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}"
         )
+    random = kwargs.get("random")
+    if random is not None and not isinstance(random, np.random.RandomState):
+        try:
+            np.random.RandomState(random)  # what dm_control will make of it
+        except (TypeError, ValueError) as error:
+            raise ValueError(
+                f"task_kwargs['random'] must be None, an integer seed (0 .. 2**32 - 1, or a sequence "
+                f"of them) or a np.random.RandomState; got {random!r} ({error})"
+            ) from None
     return factory(environment_kwargs=environment_kwargs, **kwargs)
 
 
