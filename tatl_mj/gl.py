@@ -21,10 +21,17 @@ glfw          unset (PyOpenGL's default)      a display (X11 / Wayland)
 Each candidate is probed in a short child process that imports mujoco under
 that backend and renders one tiny frame, so a backend that crashes or fails to
 load never poisons the calling process. The probe costs about a second.
+
+``import tatl_mj`` itself only sets a default where mujoco's own would fail:
+with ``MUJOCO_GL`` unset and no display, mujoco and dm_control pick GLFW, warn
+about ``DISPLAY`` and cannot render; :func:`headless_default` then picks EGL or
+OSMesa by whether its library loads (no probe), and :func:`select_backend`
+still probes and falls back as if ``MUJOCO_GL`` were unset.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import subprocess
 import sys
@@ -32,6 +39,8 @@ from collections.abc import MutableMapping
 
 BACKENDS: tuple[str, ...] = ("egl", "osmesa", "glfw")
 AUTO_ORDER: tuple[str, ...] = ("egl", "osmesa")
+LIBRARIES = {"egl": "EGL", "osmesa": "OSMesa"}
+DEFAULT_MARKER = "TATL_MJ_GL_DEFAULT"  # names the backend headless_default chose
 PROBE_TIMEOUT_S = 120.0
 
 # First loads the GL library the way PyOpenGL looks for it (lib<name>.so, then
@@ -79,6 +88,36 @@ class UnknownBackendError(GLBackendError, ValueError):
     """``MUJOCO_GL`` names no backend; a ValueError that a GLBackendError handler also catches."""
 
 
+def headless_default(environ: MutableMapping[str, str] = os.environ) -> str | None:
+    """Sets ``MUJOCO_GL`` on a machine without a display if it is unset; returns the choice or None.
+
+    Does nothing if ``MUJOCO_GL`` is set, a display is (``DISPLAY`` or
+    ``WAYLAND_DISPLAY``), or mujoco is already imported. Otherwise picks the
+    first of egl, osmesa whose library loads, and records it in
+    ``TATL_MJ_GL_DEFAULT`` (inherited by worker processes) so that
+    :func:`select_backend` treats it as a default, not as the user's choice.
+    """
+    if any(environ.get(k) for k in ("MUJOCO_GL", "DISPLAY", "WAYLAND_DISPLAY")) or "mujoco" in sys.modules:
+        return None
+    for name in AUTO_ORDER:
+        if _library_loads(LIBRARIES[name]):
+            _set(environ, name)
+            environ[DEFAULT_MARKER] = name
+            return name
+    return None
+
+
+def _library_loads(library: str) -> bool:
+    """Whether lib<library>.so loads, under the names PyOpenGL tries."""
+    for name in [f"lib{library}.so"] + [f"lib{library}.so.{i}" for i in range(9, -1, -1)]:
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
+
+
 def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
     """Chooses the GL backend, sets ``MUJOCO_GL`` and ``PYOPENGL_PLATFORM``; returns its name.
 
@@ -92,6 +131,8 @@ def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
         errors and the fix), or mujoco was already imported with another backend.
     """
     requested = environ.get("MUJOCO_GL", "").strip().lower()
+    if requested and requested == environ.get(DEFAULT_MARKER) and _imported_backend() is None:
+        requested = ""  # headless_default's guess, not the user's choice: probe as if unset
     if requested and requested not in BACKENDS:
         raise UnknownBackendError(
             f"MUJOCO_GL={environ['MUJOCO_GL']!r} is not a rendering backend; "

@@ -114,6 +114,40 @@ def test_unset_backend_falls_back_to_osmesa_when_egl_is_missing(tmp_path):
     assert child.stdout.split() == ["osmesa", "osmesa"]
 
 
+def test_import_without_display_picks_a_headless_backend():
+    # mujoco/dm_control alone would pick GLFW here, warn about DISPLAY and fail to render.
+    env = _child_env()
+    for key in ("DISPLAY", "WAYLAND_DISPLAY", gl.DEFAULT_MARKER):
+        env.pop(key, None)
+    script = ("import os; from tatl_mj import suite; e = suite.load('cartpole', 'balance'); e.reset(); "
+              "print(os.environ['MUJOCO_GL'], e.physics.render(24, 32).shape)")
+    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
+                           timeout=120)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout.split() == ["egl", "(24,", "32,", "3)"]
+    assert "DISPLAY" not in child.stderr and "Traceback" not in child.stderr, child.stderr
+    # With a display, MUJOCO_GL is left to mujoco's own choice.
+    shown = subprocess.run([sys.executable, "-c", "import os, tatl_mj; print(os.environ.get('MUJOCO_GL'))"],
+                           env={**env, "DISPLAY": ":0"}, cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert shown.stdout.strip() == "None", shown.stderr
+
+
+def test_headless_default_is_still_probed_and_falls_back(tmp_path):
+    # The default is a guess from the library alone; select_backend treats it as
+    # unset, so a libEGL that does not load still ends on OSMesa.
+    env = _child_env(MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl", LD_LIBRARY_PATH=_fake_gl_libraries(tmp_path, "EGL"))
+    env[gl.DEFAULT_MARKER] = "egl"
+    script = "from tatl_mj import gl; print(gl.select_backend())"
+    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
+                           timeout=120)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout.strip() == "osmesa"
+    env.pop(gl.DEFAULT_MARKER)  # the user's own MUJOCO_GL=egl is honoured, and fails clearly
+    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
+                           timeout=120)
+    assert child.returncode != 0 and "cannot load libEGL" in child.stderr
+
+
 def test_select_backend_in_a_process_where_mujoco_is_imported():
     # This process imported mujoco under conftest's backend: the choice is fixed.
     current = os.environ["MUJOCO_GL"]
