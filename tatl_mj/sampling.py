@@ -327,7 +327,12 @@ def collect(
         # Start an episode only when the live ones are not expected to supply
         # the transitions still missing: starting all slots at once would cut
         # long episodes (time-limited ones) short and throw most of them away.
-        # This choice changes only the speed, never the result's episodes.
+        # The schedule depends on episode lengths only, so it is deterministic;
+        # it fixes which live episode gets which random action (drawn per
+        # lockstep), so changing it changes the data, never its distribution.
+        # The mean over ended episodes runs short while long ones still run,
+        # so episodes that fall beyond n are stepped too: about 3% extra steps
+        # for 10^5 bicycle transitions, 50% for 2x10^4.
         expected = ended_steps / ended_count if ended_count else (limit if np.isfinite(limit) else 100.0)
         free = np.flatnonzero(slot_episode < 0)
         running = episodes.lengths[slot_episode[slot_episode >= 0]]
