@@ -49,19 +49,12 @@ PROBE_TIMEOUT_S = 120.0
 # model: the context, MuJoCo's render context and the pixel read-back, exactly
 # the path render.py uses.
 _PROBE = """\
-import ctypes, sys
-library = {"egl": "EGL", "osmesa": "OSMesa"}.get(sys.argv[1])
-if library:
-    names = [f"lib{library}.so"] + [f"lib{library}.so.{i}" for i in range(9, -1, -1)]
-    failures = []
-    for name in names:
-        try:
-            ctypes.CDLL(name, mode=ctypes.RTLD_GLOBAL)
-            break
-        except OSError as error:
-            failures.append(str(error))
-    else:
-        sys.exit(f"cannot load lib{library}.so ({failures[0]})")
+import sys
+from tatl_mj.gl import LIBRARIES, library_error
+library = LIBRARIES.get(sys.argv[1])
+error = library and library_error(library)
+if error:
+    sys.exit(f"cannot load lib{library}.so ({error})")
 import mujoco
 model = mujoco.MjModel.from_xml_string(
     '<mujoco><worldbody><light pos="0 0 2"/><geom size=".1"/></worldbody></mujoco>')
@@ -100,22 +93,23 @@ def headless_default(environ: MutableMapping[str, str] = os.environ) -> str | No
     if any(environ.get(k) for k in ("MUJOCO_GL", "DISPLAY", "WAYLAND_DISPLAY")) or "mujoco" in sys.modules:
         return None
     for name in AUTO_ORDER:
-        if _library_loads(LIBRARIES[name]):
+        if library_error(LIBRARIES[name]) is None:
             _set(environ, name)
             environ[DEFAULT_MARKER] = name
             return name
     return None
 
 
-def _library_loads(library: str) -> bool:
-    """Whether lib<library>.so loads, under the names PyOpenGL tries."""
+def library_error(library: str) -> str | None:
+    """Loads lib<library>.so globally under the names PyOpenGL tries; None, or the first name's error."""
+    failures = []
     for name in [f"lib{library}.so"] + [f"lib{library}.so.{i}" for i in range(9, -1, -1)]:
         try:
-            ctypes.CDLL(name)
-            return True
-        except OSError:
-            continue
-    return False
+            ctypes.CDLL(name, mode=ctypes.RTLD_GLOBAL)
+            return None
+        except OSError as error:
+            failures.append(str(error))
+    return failures[0]
 
 
 def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
@@ -181,6 +175,9 @@ def probe(name: str, environ: MutableMapping[str, str] = os.environ) -> str | No
         raise ValueError(f"backend {name!r} is unknown; valid choices: {', '.join(BACKENDS)}")
     env = dict(environ)
     _set(env, name)
+    # The probe imports tatl_mj.gl: make this copy of the package importable there.
+    package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     try:
         result = subprocess.run(
             [sys.executable, "-c", _PROBE, name], env=env, capture_output=True, text=True,

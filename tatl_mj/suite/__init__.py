@@ -70,7 +70,7 @@ def load(
     random = kwargs.get("random")
     if random is not None and not isinstance(random, np.random.RandomState):
         try:
-            np.random.RandomState(random)  # what dm_control will make of it
+            kwargs["random"] = np.random.RandomState(random)  # what dm_control would make of it
         except (TypeError, ValueError) as error:
             raise ValueError(
                 f"task_kwargs['random'] must be None, an integer seed (0 .. 2**32 - 1, or a sequence "
