@@ -6,7 +6,7 @@ import scipy.linalg
 
 from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot
 from tatl_mj.transfer.fqi import (
-    ExtraTreesRegressor, LinearRegressor, TabularQ, fitted_q_iteration, make_regressor, q_iteration, time_fqi,
+    ExtraTreesRegressor, LinearRegressor, TabularQ, fitted_q_iteration, make_regressor, q_iteration,
 )
 from tatl_mj.transitions import Transitions
 
@@ -157,12 +157,6 @@ def test_make_regressor_from_spec():
     assert isinstance(reg, LinearRegressor) and reg.ridge == 1e-4 and reg.features.size(2) == 21
     trees = make_regressor({"kind": "extra_trees", "seed": 3}, 2)
     assert trees == ExtraTreesRegressor(50, 5, 2, 3)
-
-
-def test_time_fqi_reports_a_run():
-    result = time_fqi(n=3_000, iterations=3)
-    assert result["n_transitions"] == 3_000 and result["n_features"] == 21
-    assert np.isfinite(result["fqi_seconds"]) and result["fqi_seconds"] > 0  # speed is `tatl bench`'s
 
 
 def test_make_regressor_accepts_a_learner_section_with_both_seed_and_features():

@@ -11,7 +11,7 @@ from tatl_mj.transfer.baselines import MappedQ, rl, uma_tl
 from tatl_mj.transfer.features import RBF, Features, LinearFeatures, OneHot, make_features
 from tatl_mj.transfer.fqi import (
     ExtraTreesRegressor, LinearQ, LinearRegressor, QFunction, TabularQ, fitted_q_iteration,
-    make_regressor, q_iteration, time_fqi,
+    make_regressor, q_iteration,
 )
 from tatl_mj.transfer.method import METHODS, RL, TATL, UMATL, Policy, TransferMethod, TransferProblem
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy, TATLStep
@@ -22,5 +22,5 @@ __all__ = [
     "MappedQ", "Mapping", "OneHot", "Policy", "QFunction", "RBF", "RL", "TATL", "TATLPolicy", "TATLStep",
     "TabularQ", "TransferMethod", "TransferProblem", "UMATL", "align_manifolds", "fit_apprentice",
     "fitted_q_iteration", "learn_apprentice", "make_features", "make_regressor", "q_iteration", "rl",
-    "time_fqi", "uma_tl",
+    "uma_tl",
 ]

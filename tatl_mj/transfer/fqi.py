@@ -23,14 +23,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
 from sklearn import ensemble
 
-from tatl_mj.transfer.features import Features, RBF, as_states, make_features
+from tatl_mj.transfer.features import Features, as_states, make_features
 from tatl_mj.transitions import Transitions
 
 
@@ -393,48 +392,7 @@ def q_iteration(
     return TabularQ(q, cells)
 
 
-# --- Benchmark ----------------------------------------------------------------
-
-def time_fqi(
-    n: int = 100_000,
-    n_actions: int = 3,
-    iterations: int = 20,
-    n_centers: int = 20,
-    gamma: float = 0.95,
-    seed: int = 0,
-) -> dict[str, float]:
-    """Times FQI with the RBF regressor on ``n`` synthetic pendulum-like transitions.
-
-    Returns seconds for building the data, and for the FQI call (features, factorisations
-    and all iterations), plus the sizes used. For ``tatl bench``.
-    """
-    rng = np.random.default_rng(seed)
-    start = time.perf_counter()
-    states = rng.uniform([-np.pi, -8.0], [np.pi, 8.0], size=(n, 2))
-    actions = rng.integers(n_actions, size=n)
-    torque = np.linspace(-2.0, 2.0, n_actions)[actions]
-    dt = 0.05
-    vel = states[:, 1] + dt * (9.81 * np.sin(states[:, 0]) + 3.0 * torque)
-    next_states = np.stack([states[:, 0] + dt * vel, vel], axis=1)
-    transitions = Transitions(
-        states, actions, np.cos(states[:, 0]), next_states,
-        np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
-    )
-    built = time.perf_counter()
-    features = RBF.grid([-np.pi, -8.0], [np.pi, 8.0], n_centers, [1.2, 1.2])
-    fitted_q_iteration(transitions, n_actions, LinearRegressor(features), gamma, iterations)
-    done = time.perf_counter()
-    return {
-        "n_transitions": float(n),
-        "n_actions": float(n_actions),
-        "iterations": float(iterations),
-        "n_features": float(features.size(2)),
-        "data_seconds": built - start,
-        "fqi_seconds": done - built,
-    }
-
-
 __all__ = [
     "ExtraTreesRegressor", "LinearQ", "LinearRegressor", "QFunction", "REGRESSOR_KINDS", "Regressor",
-    "TabularQ", "TreeQ", "ZeroQ", "fitted_q_iteration", "make_regressor", "q_iteration", "time_fqi",
+    "TabularQ", "TreeQ", "ZeroQ", "fitted_q_iteration", "make_regressor", "q_iteration",
 ]
