@@ -248,3 +248,12 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
         assert summary[key] > 0
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
+
+
+def test_transitions_save_and_load_round_trip(tmp_path):
+    tr = sampling.collect("pendulum", "swingup", 250, seed=2)
+    tr.save(str(tmp_path / "t.npz"))
+    back = type(tr).load(str(tmp_path / "t.npz"))
+    for name in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(tr, name))
+        assert getattr(back, name).dtype == getattr(tr, name).dtype
