@@ -63,24 +63,29 @@ def _run(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
-def _methods(text: str) -> dict:
-    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method}; ``module:attr`` entries are imported.
+def _methods(text: str | None) -> dict | None:
+    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method object, or None for a built-in}.
 
-    ``attr`` may be a class (instantiated without arguments) or an instance; the
-    method's ``name`` attribute names it in the results.
+    Built-ins run with the spec's settings for them; ``module:attr`` entries are
+    imported, ``attr`` being a class (instantiated without arguments) or an
+    instance whose ``name`` names it in the results. None (no --methods): each
+    spec's own ``[methods]``.
     """
     import importlib
 
-    from tatl_mj.transfer import method as method_mod
+    from tatl_mj.transfer import registry
+    from tatl_mj.transfer.method import TransferMethod
 
-    methods = {}
+    if text is None:
+        return None
+    methods: dict = {}
     for entry in filter(None, (e.strip() for e in text.split(","))):
         if ":" not in entry:
-            if entry not in method_mod.METHODS:
+            if entry not in registry.METHODS:
                 raise ValueError(
-                    f"unknown method {entry!r}; built-ins: {sorted(method_mod.METHODS)}, or module:Class"
+                    f"unknown method {entry!r}; built-ins: {sorted(registry.METHODS)}, or module:Class"
                 )
-            methods[entry] = method_mod.METHODS[entry]
+            methods[entry] = None
             continue
         module_name, _, attr = entry.partition(":")
         try:
@@ -88,7 +93,7 @@ def _methods(text: str) -> dict:
         except (ImportError, AttributeError) as error:
             raise ValueError(f"cannot import {entry!r}: {error}") from None
         obj = obj() if isinstance(obj, type) else obj
-        if not isinstance(obj, method_mod.TransferMethod):
+        if not isinstance(obj, TransferMethod):
             raise ValueError(f"{entry!r} is not a TransferMethod (needs a name and learn(problem, samples))")
         methods[obj.name] = obj
     if not methods:
@@ -149,8 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="parallel work units (default: 2)")
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
-    p.add_argument("--methods", default="ta-tl,uma-tl,rl",
-                   help="comma-separated built-in methods and/or your own as module:Class (default: all built-ins)")
+    p.add_argument("--methods", default=None,
+                   help="comma-separated built-in methods and/or your own as module:Class "
+                        "(default: the methods each spec lists)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser("plot", help="figures and results table of a finished run")
@@ -159,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="render a clip of a method's policy on the target task")
     p.add_argument("spec")
-    p.add_argument("--method", choices=("ta-tl", "uma-tl", "rl", "random"), default="ta-tl")
+    p.add_argument("--method", default="ta-tl", help="a method the spec lists, or random (default: ta-tl)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="clip path, .mp4 or .gif")
     p.add_argument("--seconds", type=float, default=5.0)

@@ -15,8 +15,8 @@ How a clip is made
     the last step at or before that time. Nothing here runs unless a clip is
     asked for, so simulation and training are never slowed by rendering.
   - MuJoCo tasks are drawn with ``mujoco.Renderer`` from the model's camera
-    (``"tracking"`` by default, which follows the system); the grid world, which
-    has no MuJoCo model, is drawn with numpy and Pillow.
+    (``"tracking"`` by default, which follows the system); a task without a
+    MuJoCo model draws itself (its ``painter``, numpy and Pillow).
   - Overlay (top left, small): episode time, method label and running return.
     Each panel is labelled with its domain at the bottom left.
   - Episode end: with ``on_end="freeze"`` (default) the last frame is held for the
@@ -47,14 +47,12 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from tatl_mj.suite import gridworld
-
 Policy = Callable[[np.ndarray], np.ndarray]
 SourceSpec = tuple[Any, Callable[[np.ndarray], np.ndarray]]
 
 END_MODES: tuple[str, ...] = ("freeze", "reset")
 CLIP_EXTENSIONS: tuple[str, ...] = (".mp4", ".gif")
-GRID_STEP_SECONDS = 0.25  # grid-world steps have no duration: show four per second
+UNTIMED_STEP_SECONDS = 0.25  # steps without a duration (no physics): show four per second
 
 
 def render_episode(
@@ -73,11 +71,11 @@ def render_episode(
     """Films ``policy`` acting in ``env``; returns frames ``(round(seconds * fps), H, W, 3)`` uint8.
 
     Args:
-      env: a tatl-mj (or dm_control) environment, or the grid world.
+      env: a tatl-mj (or dm_control) environment, or one that draws itself (``painter``).
       policy: maps a batched state ``(1, d)`` to action values ``(1, m)`` (or
-        action indices ``(1,)`` for the grid world).
-      seconds: clip length in simulated seconds (grid world: steps times
-        ``GRID_STEP_SECONDS``).
+        action indices ``(1,)`` for a task that takes indices).
+      seconds: clip length in simulated seconds (untimed steps count
+        ``UNTIMED_STEP_SECONDS`` each).
       width, height: size of each panel in pixels (at most the model's
         offscreen buffer, 1280x960 for tatl-mj models).
       fps: frames per second of the clip.
@@ -237,12 +235,13 @@ def _painter(env: Any, width: int, height: int, camera: str,
     ``paint()`` draws the current state; ``show(state)`` draws ``state`` (for a
     MuJoCo env it puts the simulator in that state first).
     """
-    if isinstance(env, gridworld.GridWorld):
-        return _grid_painters(env, width, height)
+    if hasattr(env, "painter"):  # an environment that draws itself (no MuJoCo model)
+        show_state = env.painter(width, height)
+        return (lambda: show_state(env.state_vector())), show_state
     physics = getattr(env, "physics", None)
     if physics is None:
         raise ValueError(
-            f"env must be a tatl-mj task (a MuJoCo environment or the grid world), "
+            f"env must be a tatl-mj task (a MuJoCo environment or one with a painter), "
             f"got {type(env).__name__}"
         )
     model = physics.model
@@ -274,55 +273,6 @@ def _painter(env: Any, width: int, height: int, camera: str,
         return paint()
 
     return paint, show
-
-
-def _grid_painters(env: gridworld.GridWorld, width: int, height: int) -> tuple[Painter, StatePainter]:
-    """Draws the grid: free cells, obstacles, the wind band (windy task), start, goal, agent."""
-    rows, cols = gridworld.N_ROWS, gridworld.N_COLS
-    band = max(11, round(height / 30)) + 2 * max(4, round(height / 90)) + 4  # label strips
-    cell = max(2, min((width - 8) // cols, (height - 2 * band) // rows))
-    x0, y0 = (width - cell * cols) // 2, (height - cell * rows) // 2
-    canvas = Image.new("RGB", (width, height), (46, 56, 72))
-    draw = ImageDraw.Draw(canvas)
-    wind = gridworld.WIND if env.windy else np.zeros(cols, dtype=int)
-    font = _font(max(9, cell // 2))
-
-    def box(row: int, col: int, inset: int = 0) -> tuple[int, int, int, int]:
-        return (x0 + col * cell + inset, y0 + row * cell + inset,
-                x0 + (col + 1) * cell - 1 - inset, y0 + (row + 1) * cell - 1 - inset)
-
-    for row in range(rows):
-        for col in range(cols):
-            if gridworld.OBSTACLES[row, col]:
-                fill = (70, 70, 78)
-            elif wind[col] > 0:
-                fill = (205, 225, 250) if wind[col] == 1 else (160, 195, 240)
-            else:
-                fill = (236, 236, 232)
-            draw.rectangle(box(row, col), fill=fill, outline=(150, 150, 150))
-            if wind[col] > 0 and not gridworld.OBSTACLES[row, col]:
-                # One small up-chevron per cell of push, so the strength reads at a glance.
-                cx = x0 + col * cell + cell // 2
-                for i in range(int(wind[col])):
-                    cy = y0 + row * cell + cell // 4 + i * cell // 4
-                    half = max(2, cell // 8)
-                    draw.line([(cx - half, cy + half), (cx, cy), (cx + half, cy + half)],
-                              fill=(60, 100, 170), width=max(1, cell // 20))
-    for (row, col), fill, text in ((gridworld.START, (255, 236, 170), "S"),
-                                   (gridworld.GOAL, (120, 200, 120), "G")):
-        draw.rectangle(box(row, col), fill=fill, outline=(150, 150, 150))
-        draw.text(((box(row, col)[0] + box(row, col)[2]) / 2, (box(row, col)[1] + box(row, col)[3]) / 2),
-                  text, font=font, fill=(40, 40, 40), anchor="mm")
-    background = np.array(canvas)
-
-    def show(state: np.ndarray) -> np.ndarray:
-        row, col = (int(v) for v in gridworld.free_cells()[gridworld.cell_indices(state)[0]])
-        image = Image.fromarray(background)
-        ImageDraw.Draw(image).ellipse(box(row, col, inset=max(1, cell // 6)),
-                                      fill=(230, 90, 40), outline=(120, 40, 10))
-        return np.array(image)
-
-    return (lambda: show(env.state_vector())), show
 
 
 # --- Overlay --------------------------------------------------------------------
@@ -382,7 +332,7 @@ def _check_frame(index: int, frame: np.ndarray) -> np.ndarray:
 def _step_seconds(env: Any) -> float:
     if hasattr(env, "physics"):
         return float(env.control_timestep())
-    return GRID_STEP_SECONDS
+    return UNTIMED_STEP_SECONDS
 
 
 def _state(timestep: Any) -> np.ndarray:
@@ -412,8 +362,8 @@ def _end_reason(env: Any, timestep: Any) -> str:
 
 
 def _domain_name(env: Any) -> str:
-    if isinstance(env, gridworld.GridWorld):
-        return "windy grid world" if env.windy else "grid world"
+    if hasattr(env, "title"):
+        return str(env.title)
     physics = getattr(env, "physics", None)
     owner = type(physics) if physics is not None else type(env)
     return owner.__module__.rsplit(".", 1)[-1]

@@ -30,7 +30,7 @@ episodes only as fast as they are expected to be needed, so that long
 (time-limited) episodes are not cut short and thrown away.
 
 Tasks whose model changes during an episode (``rollout_compatible = False``,
-the time-varying pendulum) and tasks without physics (the grid world) are
+the time-varying pendulum) and tasks without physics (a known tabular model) are
 stepped through their environments behind the same functions.
 
 Seeding: ``collect``/``evaluate`` with ``seed`` draw start states from the
@@ -53,6 +53,7 @@ import numpy as np
 from dm_control.rl import control
 
 from tatl_mj import suite
+from tatl_mj.description import cell_rows
 from tatl_mj.transitions import Transitions
 
 IndexPolicy = Callable[[np.ndarray], np.ndarray]
@@ -241,7 +242,7 @@ def _check_values(values: Any, n: int, sim: _Simulator) -> np.ndarray:
     if v.shape == (n,) and sim.action_dim == 1:
         v = v[:, None]
     if v.shape != (n, sim.action_dim):
-        if np.issubdtype(sim.actions.dtype, np.integer):  # the grid world: actions are indices
+        if np.issubdtype(sim.actions.dtype, np.integer):  # the task takes action indices
             raise ValueError(
                 f"policy must return ({n},) action indices in 0..{len(sim.actions) - 1} "
                 f"for {sim.domain}, got shape {v.shape}"
@@ -396,7 +397,7 @@ def _collect_env(
     sim: _Simulator, n: int, seed: int, rng: np.random.Generator,
     policy: IndexPolicy | None, max_episode_steps: int | None,
 ) -> Transitions:
-    """A plain loop over one environment (time-varying models, the grid world)."""
+    """A plain loop over one environment (time-varying models, tasks without physics)."""
     env = sim.make_env(seed)
     n_actions = len(sim.actions)
     state = _observed_state(env.reset())
@@ -445,36 +446,60 @@ def step_from(
     Each start is put in place as ``set_state_vector`` does (a fresh reset,
     then the paper state), and ``action_indices`` (N,) index ``ACTIONS``.
     Controls that draw noise use a ``RandomState(0)``. A step that diverges
-    returns its start state, as the environment does. The grid world answers
-    from its ``transition_model``.
+    returns its start state, as the environment does. A task with a known
+    exact model (``suite.describe(...).known_model``) answers from it.
     """
     sim = _simulator(domain, task, task_kwargs, n_threads)
-    env = sim.env
-    s = np.asarray(states, np.float64)
-    if s.ndim != 2 or not np.all(np.isfinite(s)):
-        raise ValueError(f"states must be a finite (N, d) array, got shape {s.shape}")
+    s = _check_states(states)
     a = _check_indices(action_indices, len(s), len(sim.actions))
     if not sim.fast:
         return _step_from_env(sim, s, a)
+    return _step_values(sim, s, sim.actions[a])
+
+
+def step_values_from(
+    domain: str,
+    task: str,
+    states: np.ndarray,
+    action_values: np.ndarray,
+    task_kwargs: dict[str, Any] | None = None,
+    n_threads: int = 2,
+) -> np.ndarray:
+    """Like :func:`step_from`, with actuator values (N, m) instead of action indices."""
+    sim = _simulator(domain, task, task_kwargs, n_threads)
+    s = _check_states(states)
+    if not sim.fast:
+        raise ValueError(f"{domain}/{task} is stepped through its environment; use step_from with action indices")
+    return _step_values(sim, s, _check_values(action_values, len(s), sim))
+
+
+def _check_states(states: Any) -> np.ndarray:
+    s = np.asarray(states, np.float64)
+    if s.ndim != 2 or not np.all(np.isfinite(s)):
+        raise ValueError(f"states must be a finite (N, d) array, got shape {s.shape}")
+    return s
+
+
+def _step_values(sim: _Simulator, s: np.ndarray, values: np.ndarray) -> np.ndarray:
     if s.shape[1] != sim.physics.STATE_SIZE:
-        raise ValueError(f"{domain} states must have {sim.physics.STATE_SIZE} columns, got {s.shape[1]}")
+        raise ValueError(f"{sim.domain} states must have {sim.physics.STATE_SIZE} columns, got {s.shape[1]}")
     if len(s) == 0:
         return s.copy()
     batch = sim.query_batch(len(s))
     ids = np.arange(len(s))
     sim.place(batch, ids, *sim.physics.qpos_qvel_from(s))
-    controls = env.task.controls(sim.actions[a], np.random.RandomState(0))
+    controls = sim.env.task.controls(values, np.random.RandomState(0))
     next_states, diverged = sim.advance(batch, ids, controls, np.ones(len(ids), bool))
     next_states[diverged] = s[diverged]
     return next_states
 
 
 def _step_from_env(sim: _Simulator, s: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """One step per query through the environment, or the grid world's exact model."""
-    if sim.domain == "gridworld" and not sim.kwargs.get("stochastic_wind", False):
-        module = suite.DOMAINS["gridworld"]
-        next_index, _, _, cells = module.transition_model(windy=sim.task_name == "windy")
-        return cells[next_index[module.cell_indices(s), a]].astype(np.float64)
+    """One step per query through the environment, or the task's known exact model."""
+    known_model = suite.describe(sim.domain, sim.task_name, sim.kwargs).known_model
+    if known_model is not None:
+        next_index, _, _, cells = known_model()
+        return cells[next_index[cell_rows(cells, s), a]].astype(np.float64)
     env = sim.env
     target = getattr(env, "physics", env)  # whichever holds set_state_vector
     out = np.empty_like(s)

@@ -12,8 +12,9 @@ class ZeroTorque:
     name: str = "zero"
 
     def learn(self, problem, target_samples):
-        middle = len(problem.target_actions) // 2
-        if problem.target_discrete:  # the grid world: a policy returns action indices
+        target = problem.target  # the target task's description (tatl_mj.suite.describe)
+        middle = target.n_actions // 2
+        if target.discrete:  # a task that takes action indices (the grid world)
             return lambda states: np.full(len(states), middle)
-        value = np.asarray(problem.target_actions, dtype=np.float64)[middle]
+        value = target.action_values[middle]
         return lambda states: np.repeat(value[None], len(states), axis=0)

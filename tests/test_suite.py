@@ -203,3 +203,43 @@ def test_divergence_ends_the_episode_cleanly(domain, task):
     after = env.step(suite.action_set(domain)[0])
     assert after.step_type is dm_env.StepType.FIRST and env.diverged is None
     assert np.all(np.isfinite(after.observation["state"]))
+
+
+@pytest.mark.parametrize("domain, task", suite.ALL_TASKS)
+def test_describe_agrees_with_the_environment(domain, task):
+    """suite.describe states what a built environment does, without building one."""
+    description = suite.describe(domain, task)
+    env = suite.load(domain, task, task_kwargs={"random": 0})
+    state = env.reset().observation["state"]
+    assert description.state_dim == len(state) and len(description.periodic) == len(state)
+    spec = env.action_spec()
+    assert description.discrete == isinstance(spec, dm_env.specs.DiscreteArray)
+    assert description.n_actions == len(suite.action_set(domain))
+    if not description.discrete:
+        np.testing.assert_array_equal(description.action_values, suite.action_set(domain))
+        np.testing.assert_array_equal(description.action_low, np.broadcast_to(spec.minimum, spec.shape))
+        np.testing.assert_array_equal(description.action_high, np.broadcast_to(spec.maximum, spec.shape))
+        assert description.control_timestep == pytest.approx(env.control_timestep())
+    for i, periodic in enumerate(description.periodic):
+        if periodic:  # observed angles are wrapped
+            assert -np.pi <= state[i] < np.pi
+    assert np.all(description.state_low <= state) and np.all(state <= description.state_high)
+
+
+def test_describe_gives_the_known_model_only_where_it_is_exact():
+    model = suite.describe("gridworld", "windy").known_model
+    env = suite.load("gridworld", "windy", task_kwargs={"random": 0})
+    next_state, reward, absorbing, cells = model()
+    for i in (0, 17, 40):
+        for a in range(4):
+            env.reset()
+            if tuple(cells[i]) == (5, 8):  # the goal ends an episode; it cannot be a start
+                continue
+            env.set_state_vector(cells[i])
+            timestep = env.step(a)
+            np.testing.assert_array_equal(timestep.observation["state"], cells[next_state[i, a]])
+            assert timestep.reward == reward[i, a]
+    assert suite.describe("gridworld", "windy", {"stochastic_wind": True}).known_model is None
+    assert suite.describe("pendulum", "swingup").angle_origin == (np.pi, 0.0)
+    with pytest.raises(ValueError, match="unknown task_kwargs \\['wind'\\]"):
+        suite.describe("gridworld", "windy", {"wind": 2})

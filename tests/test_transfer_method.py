@@ -7,7 +7,9 @@ from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.baselines import MappedQ, rl, uma_tl
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor
-from tatl_mj.transfer.method import METHODS, RL, TATL, UMATL, TransferMethod, TransferProblem
+from tatl_mj.description import TaskDescription
+from tatl_mj.transfer.method import RL, TATL, UMATL, TransferMethod, TransferProblem
+from tatl_mj.transfer.registry import METHODS, build
 from tatl_mj.transfer.tatl import TATLPolicy
 from tatl_mj.transitions import Transitions
 
@@ -35,21 +37,34 @@ def _samples(n=400, seed=0):
     return Transitions(s, a, r, s_next, np.zeros(n, bool), np.zeros(n, bool))
 
 
-def _problem(**overrides):
+def _description(actions, discrete=False, low=-3.0, high=3.0):
+    return TaskDescription(
+        domain="toy", task="t", state_names=("x", "v"), periodic=(False, False), action_values=actions,
+        discrete=discrete, control_timestep=0.1,
+        action_low=None if discrete else [low], action_high=None if discrete else [high],
+    )
+
+
+def _problem(target_discrete=False, **overrides):
     kwargs = dict(
         source_q=SourceQ(), mapping=IdentityMapping(),
         source_step=lambda x, i: x + 0.1 * np.stack([x[:, 1], ACTIONS[i, 0]], axis=1),
-        source_actions=ACTIONS, target_actions=2 * ACTIONS, target_low=[-3.0], target_high=[3.0],
-        target_discrete=False, apprentice_features=LinearFeatures(),
-        regressor={"kind": "linear", "features": {"kind": "linear"}}, gamma=0.9, iterations=10, seed=0,
+        source=_description(ACTIONS), target=_description(2 * ACTIONS, discrete=target_discrete), seed=0,
     )
     kwargs.update(overrides)
     return TransferProblem(**kwargs)
 
 
-def test_methods_dict_and_protocol():
+def test_registry_and_protocol():
     assert set(METHODS) == {"ta-tl", "uma-tl", "rl"}
-    assert all(isinstance(m, TransferMethod) and m.name == key for key, m in METHODS.items())
+    for name in METHODS:
+        method = build(name)
+        assert isinstance(method, TransferMethod) and method.name == name
+    assert build("ta-tl", {"zeta": 0.3, "adaptive_actions": [-1, 1]}) == TATL(zeta=0.3, adaptive_actions=(-1, 1))
+    with pytest.raises(ValueError, match="unknown setting 'zeeta' for method 'ta-tl'; valid settings: .*zeta"):
+        build("ta-tl", {"zeeta": 0.3})
+    with pytest.raises(ValueError, match="unknown method 'ta-tll'; valid methods"):
+        build("ta-tll")
 
     class MyMethod:
         name = "always-zero"
@@ -58,6 +73,22 @@ def test_methods_dict_and_protocol():
             return lambda states: np.zeros((len(states), 1))
 
     assert isinstance(MyMethod(), TransferMethod)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: TATL(zeta=-1.0), r"TATL.zeta must be in \(0.0"),
+    (lambda: TATL(apprentice={"kind": "polynomial"}), "TATL.apprentice: features kind 'polynomial' is unknown"),
+    (lambda: TATL(apprentice={"kind": "rbf", "centres": 100, "sigma": [1.0]}), "unknown keys \\['centres'\\]"),
+    (lambda: TATL(batch=0), "TATL.batch must be in"),
+    (lambda: UMATL(regressor="svm"), r"UMATL.regressor is 'svm'; valid choices: \['linear', 'extra_trees'\]"),
+    (lambda: RL(regressor="extra_trees", ridge=1.0), "RL.ridge applies to regressor 'linear' only"),
+    (lambda: RL(regressor="extra_trees", features={"kind": "linear"}), "RL.features applies to regressor 'linear'"),
+    (lambda: RL(gamma=1.0), "RL.gamma must be in"),
+    (lambda: UMATL(iterations=2.5), "UMATL.iterations must be an integer"),
+])
+def test_settings_are_checked_in_the_constructor(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
 
 
 def test_builtin_methods_return_batched_policies():
@@ -70,22 +101,29 @@ def test_builtin_methods_return_batched_policies():
     step = tatl.step(states)
     assert tatl.apprentice.B[1, 0] < 0
     np.testing.assert_allclose(tatl(states), np.clip(-0.5 * step.a_T, -3, 3), atol=1e-6)
-    for method in (UMATL(), RL()):
+    for method in (UMATL(gamma=0.9, iterations=10), RL(gamma=0.9, iterations=10)):
         actions = method.learn(problem, samples)(states)
         assert actions.shape == (7, 1) and set(actions[:, 0]) <= {-2.0, 0.0, 2.0}
     discrete = RL().learn(_problem(target_discrete=True), samples)(states)
     assert discrete.shape == (7,) and discrete.dtype == np.int64
 
 
-def test_tatl_uses_algorithm_2_when_given_a_utility_gap():
-    calls = []
+def test_tatl_uses_algorithm_2_through_the_problem_hooks():
+    """U_M = -10 for the projected policy; the 'model' return is -20 until the apprentice
+    has 100 samples, then -10.5: relative gaps 1.0 then 0.05 <= zeta = 0.1."""
+    seen = []
 
-    def gap(apprentice):
-        calls.append(apprentice)
-        return 0.0 if len(calls) >= 2 else 1.0
+    def model_return(apprentice, policy):
+        seen.append(apprentice)
+        return -20.0 if len(seen) < 2 else -10.5
 
-    policy = TATL().learn(_problem(utility_gap=gap, zeta=0.1, apprentice_batch=50), _samples())
-    assert policy.samples_used == 100 and len(calls) == 2
+    problem = _problem(target_return=lambda policy: -10.0, model_return=model_return)
+    policy = TATL(zeta=0.1, batch=50).learn(problem, _samples())
+    assert policy.samples_used == 100 and len(seen) == 2
+    assert problem.utility_gap(seen[0]) == pytest.approx(0.05)
+    # Without the hooks (or zeta None) the apprentice uses every sample.
+    assert TATL(zeta=0.1, batch=50).learn(_problem(), _samples()).samples_used == 400
+    assert TATL(zeta=None, batch=50).learn(problem, _samples()).samples_used == 400
 
 
 def test_uma_tl_starts_from_the_mapped_source_q():
@@ -109,7 +147,8 @@ def test_uma_tl_starts_from_the_mapped_source_q():
 
 
 def test_problem_validation():
-    with pytest.raises(ValueError, match="target_low"):
-        _problem(target_low=None)
-    with pytest.raises(ValueError, match="gamma"):
-        _problem(gamma=1.5)
+    with pytest.raises(ValueError, match="Assumption 1"):
+        _problem(target=_description(np.array([[1.0], [2.0]])))
+    with pytest.raises(ValueError, match="action_low/action_high are required"):
+        TaskDescription(domain="toy", task="t", state_names=("x",), periodic=(False,),
+                        action_values=ACTIONS, discrete=False, control_timestep=0.1)

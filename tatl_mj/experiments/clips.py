@@ -3,23 +3,24 @@
 It reuses a finished ``tatl run`` folder when given one (the source policy,
 mapping and target data of that seed), and otherwise trains what it needs at
 the chosen preset. The policy is the one the method learns from the preset's
-largest target-sample budget.
+largest target-sample budget, built by the same call as in evaluation
+(``pipeline.learned_policy``), so the clip shows the evaluated policy.
 """
 
 from __future__ import annotations
 
 import pickle
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from tatl_mj import render, suite
 from tatl_mj.experiments import pipeline
 from tatl_mj.experiments.records import RunDirectory
-from tatl_mj.experiments.spec import load_spec
-from tatl_mj.transfer import method as method_mod
+from tatl_mj.experiments.spec import ExperimentSpec, load_spec, methods_from_spec
 
-CLIP_METHODS = ("ta-tl", "uma-tl", "rl", "random")
+RANDOM = "random"  # the uniformly random reference policy
 
 
 def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceArtifacts:
@@ -31,27 +32,31 @@ def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceA
     return pipeline.learn_source(spec, spec.preset(preset), seed)
 
 
+def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artifacts: Any) -> Any:
+    """The policy a clip shows: the spec's ``method`` at the preset's largest budget, as evaluated."""
+    if method == RANDOM:
+        return pipeline.random_policy(spec.target, pipeline.derive_seed(seed, "random-policy"))
+    chosen = spec.preset(preset)
+    transfer = methods_from_spec(spec, chosen, [method])[method]
+    return pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+
+
 def render_from_spec(
     spec_path: str, *, method: str, seed: int, out: str, seconds: float = 5.0, width: int = 640,
     height: int = 480, fps: int = 30, preset: str = "smoke", run_dir: str | None = None,
     with_source: bool = False,
 ) -> Path:
-    if method not in CLIP_METHODS:
-        raise ValueError(f"unknown method {method!r}; valid methods: {list(CLIP_METHODS)}")
     suffix = Path(out).suffix.lower()
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"clip path must end in .mp4 or .gif, got {out!r}")
     spec = load_spec(spec_path)
     chosen = spec.preset(preset)
     target = spec.target
-    needs_artifacts = method != "random" or with_source
+    if method != RANDOM and method not in spec.methods:
+        raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
+    needs_artifacts = method != RANDOM or with_source
     artifacts = _artifacts(spec, preset, seed, run_dir) if needs_artifacts else None
-    if method == "random":
-        policy = pipeline.random_policy(target.domain, pipeline.derive_seed(seed, "random-policy"))
-    else:
-        problem = pipeline.transfer_problem(spec, artifacts, seed)
-        budget = max(chosen.target_budgets)
-        policy = method_mod.METHODS[method].learn(problem, artifacts.target_stream.head(budget))
+    policy = clip_policy(spec, preset, seed, method, artifacts)
     kwargs = {**target.task_kwargs, "random": pipeline.derive_seed(seed, spec.name, "clip")}
     env = suite.load(target.domain, target.task, task_kwargs=kwargs)
     source = None

@@ -1,15 +1,15 @@
 """What one work unit computes: the paper's three phases for one experiment and seed.
 
 Phase I and II (``learn_source``): the source policy (FQI, or exact Q-iteration
-for the grid world), the random-policy target data stream shared by every
+for a task with a known model), the random-policy target data stream shared by every
 method, and the inter-task mapping learned from random-policy samples of both
 tasks. Phase III (``run_method``): for each target-sample budget of the preset,
 a transfer method learns from the first ``n`` target transitions of that shared
 stream and its policy is evaluated on the target task.
 
 Target samples are counted the same way for every method: the number of target
-transitions the method consumed (TA-TL: the apprentice's, Algorithm 2; UMA-TL
-and RL: their target FQI batch). The target transitions used to learn the
+transitions the method consumed (a policy's ``samples_used`` where it reports one,
+e.g. TA-TL's apprentice under Algorithm 2; otherwise the whole budget). The target transitions used to learn the
 mapping are reported separately (``mapping_target_samples``), as the paper
 leaves them out of the comparison because TA-TL and UMA-TL share them.
 """
@@ -23,12 +23,12 @@ import zlib
 from functools import partial
 from typing import Any, Callable
 
-import dm_env
 import numpy as np
 
 from tatl_mj import sampling, suite
-from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side
-from tatl_mj.transfer import alignment, features, fqi, method
+from tatl_mj.description import TaskDescription
+from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
+from tatl_mj.transfer import alignment, fqi, method
 from tatl_mj.transitions import Transitions
 
 
@@ -64,7 +64,7 @@ def collect(side: Side, n: int, seed: int) -> Transitions:
     rng = np.random.default_rng(seed)
     low, high = np.asarray(side.data.state_low), np.asarray(side.data.state_high)
     states = rng.uniform(low, high, size=(n, len(low)))
-    actions = rng.integers(len(suite.action_set(side.domain)), size=n)
+    actions = rng.integers(describe(side).n_actions, size=n)
     next_states = sampling.step_from(side.domain, side.task, states, actions, task_kwargs=side.task_kwargs)
     task = suite.load(side.domain, side.task, task_kwargs=side.task_kwargs).task
     absorbing = np.asarray(task.batch_absorbing(next_states), dtype=bool)
@@ -74,9 +74,16 @@ def collect(side: Side, n: int, seed: int) -> Transitions:
     )
 
 
-def random_policy(domain: str, seed: int) -> Callable[[np.ndarray], np.ndarray]:
-    """A uniformly random policy over the domain's discrete action set (batched)."""
-    actions = suite.action_set(domain)
+def describe(side: Side) -> TaskDescription:
+    """The description of one side's task (``suite.describe``)."""
+    return suite.describe(side.domain, side.task, side.task_kwargs)
+
+
+def random_policy(side: Side, seed: int) -> Callable[[np.ndarray], np.ndarray]:
+    """A uniformly random policy over the task's discrete action set (batched):
+    actuator values, or indices for a task that takes indices."""
+    description = describe(side)
+    actions = np.arange(description.n_actions) if description.discrete else description.action_values
     rng = np.random.default_rng(seed)
     return lambda states: actions[rng.integers(len(actions), size=len(states))]
 
@@ -92,40 +99,25 @@ def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) 
 
 # --- phases I and II ----------------------------------------------------------
 
-def _regressor_spec(learner) -> dict:
-    spec = {"kind": learner.regressor, "features": learner.features}
-    if learner.regressor == "linear":
-        spec["ridge"] = learner.ridge
-    return spec
-
-
 def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int]:
     learner = spec.source_learning
-    n_actions = len(suite.action_set(spec.source.domain))
-    if learner.method == "q_iteration":
-        from tatl_mj.suite import gridworld
-
-        windy = spec.source.task == "windy"
-        next_state, reward, absorbing, cells = gridworld.transition_model(windy=windy)
+    source = describe(spec.source)
+    if learner.method == "q_iteration":  # exact, on the task's known model (checked at spec load)
+        assert source.known_model is not None
+        next_state, reward, absorbing, cells = source.known_model()
         return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
+    n_actions = source.n_actions
     data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.name, "source-data"))
     regressor = fqi.make_regressor(
-        {**_regressor_spec(learner), "seed": derive_seed(seed, spec.name, "source-fqi")}, data.state_dim,
+        {**learner.regressor_spec(), "seed": derive_seed(seed, spec.name, "source-fqi")}, data.state_dim,
     )
     q = fqi.fitted_q_iteration(data, n_actions, regressor, learner.gamma, learner.iterations)
     return q, len(data)
 
 
-def _affine_mapping(spec: ExperimentSpec, target_dim: int) -> "alignment.AffineMapping":
-    matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)
-    source_dim = len(suite.load(spec.source.domain, spec.source.task, task_kwargs=spec.source.task_kwargs)
-                     .reset().observation["state"])
-    if matrix.shape != (target_dim, source_dim):
-        raise ValueError(
-            f"{spec.path}: mapping.matrix must have {target_dim} rows (target state) of {source_dim} "
-            f"numbers (source state), got shape {matrix.shape}"
-        )
-    offset = np.asarray(spec.mapping.offset or np.zeros(target_dim), dtype=np.float64)
+def _affine_mapping(spec: ExperimentSpec) -> "alignment.AffineMapping":
+    matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)  # its shape is checked at spec load
+    offset = np.asarray(spec.mapping.offset or np.zeros(len(matrix)), dtype=np.float64)
     return alignment.AffineMapping(matrix, offset)
 
 
@@ -145,7 +137,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     if spec.mapping.kind == "identity":
         mapping, n_map_source, n_map_target = alignment.IdentityMapping(), 0, 0
     elif spec.mapping.kind == "affine":
-        mapping, n_map_source, n_map_target = _affine_mapping(spec, target_stream.state_dim), 0, 0
+        mapping, n_map_source, n_map_target = _affine_mapping(spec), 0, 0
     else:
         source_states = collect(
             spec.source, preset.alignment_samples, derive_seed(seed, spec.name, "alignment-source")
@@ -159,7 +151,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    returns, _ = evaluate(spec, preset, random_policy(spec.target.domain, derive_seed(seed, "random-policy")),
+    returns, _ = evaluate(spec, preset, random_policy(spec.target, derive_seed(seed, "random-policy")),
                           derive_seed(seed, spec.name, "evaluation"))
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
@@ -171,84 +163,38 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 
 # --- phase III ----------------------------------------------------------------
 
-def _source_step(source: Side, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """Algorithm 1's query of the source simulator, from states clipped to the source's state box.
+def _source_step(source: Side, description: TaskDescription, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """Algorithm 1's query of the source simulator, from states it can be put in.
 
     A mapped target state can fall outside the region the source system is
-    defined on (beyond the mountain car's track); the query is made from the
-    nearest state inside the box the source was learned on.
+    defined on (beyond the mountain car's track): the query is made from the
+    nearest settable state (the task's description says which), and for a
+    source learned from a uniform box, from the nearest state inside that box,
+    where its Q-function was fitted.
     """
+    states = description.clip_to_settable(states)
     if source.data.sampling == "uniform":
         states = np.clip(states, source.data.state_low, source.data.state_high)
     return sampling.step_from(source.domain, source.task, states, actions, task_kwargs=source.task_kwargs)
 
 
-def _action_values(domain: str) -> np.ndarray:
-    """Action values as the learners see them: actuator values, or grid moves."""
-    if domain == "gridworld":
-        from tatl_mj.suite import gridworld
-
-        return gridworld.MOVES.astype(np.float64)
-    return np.asarray(suite.action_set(domain), dtype=np.float64)
-
-
-def transfer_problem(spec: ExperimentSpec, artifacts: SourceArtifacts, seed: int) -> "method.TransferProblem":
-    """The bundle a transfer method learns from (see ``tatl_mj.transfer.method``)."""
-    source, target = spec.source, spec.target
-    env = suite.load(target.domain, target.task, task_kwargs=target.task_kwargs)
-    action_spec = env.action_spec()
-    # A discrete target (the grid world) takes action indices; its apprentice
-    # sees the moves [d_row, d_col] as action values.
-    discrete = isinstance(action_spec, dm_env.specs.DiscreteArray)
-    low = None if discrete else np.asarray(action_spec.minimum, dtype=np.float64)
-    high = None if discrete else np.asarray(action_spec.maximum, dtype=np.float64)
-    target_actions = _action_values(target.domain)
-    state_dim = artifacts.target_stream.state_dim
-    learner = spec.target_learning
-    return method.TransferProblem(
-        source_q=artifacts.source_q,
-        mapping=artifacts.mapping,
-        source_step=partial(_source_step, source),
-        source_actions=_action_values(source.domain),
-        target_actions=target_actions,
-        target_low=low,
-        target_high=high,
-        target_discrete=discrete,
-        apprentice_features=features.make_features(spec.apprentice.features, state_dim),
-        regressor=_regressor_spec(learner),
-        gamma=learner.gamma,
-        iterations=learner.iterations,
-        seed=derive_seed(seed, spec.name, "target-learning"),
-        apprentice_ridge=spec.apprentice.ridge,
-        # The apprentice's basis names the angle coordinates; its increments wrap there too.
-        apprentice_periodic=tuple(spec.apprentice.features["periodic"])
-        if "periodic" in spec.apprentice.features else None,
-        adaptive_actions=np.asarray(spec.apprentice.adaptive_actions, dtype=np.float64).reshape(-1, 1)
-        if spec.apprentice.adaptive_actions else None,
-    )
+def _target_step(target: Side, description: TaskDescription, states: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The real target's one step from ``states`` under the nearest discrete actions to ``values`` (oracles)."""
+    values = np.asarray(values, dtype=np.float64).reshape(len(states), -1)
+    if description.discrete:
+        gaps = np.linalg.norm(values[:, None, :] - description.action_values[None], axis=2)
+        return sampling.step_from(target.domain, target.task, states, np.argmin(gaps, axis=1),
+                                  task_kwargs=target.task_kwargs)
+    return sampling.step_values_from(target.domain, target.task, states, values, task_kwargs=target.task_kwargs)
 
 
-def projected_source_policy(problem: "method.TransferProblem") -> Callable[[np.ndarray], np.ndarray]:
-    """pi_hat(s_T) = pi*_S(chi_plus(s_T)) carried to the target's action of the same index (Algorithm 2)."""
-    actions = np.asarray(problem.target_actions, dtype=np.float64).reshape(len(problem.target_actions), -1)
+def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable | None:
+    """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
 
-    def policy(states: np.ndarray) -> np.ndarray:
-        index = problem.source_q.greedy(problem.mapping.chi_plus(states))
-        return index if problem.target_discrete else actions[index]
-
-    return policy
-
-
-def utility_gap(spec: ExperimentSpec, preset: Preset, problem: "method.TransferProblem", seed: int):
-    """Algorithm 2's |U_M(pi) - U_Mhat(pi)| / |U_M(pi)| for the projected source policy, or None.
-
-    U_M is the projected policy's average return on the real target, U_Mhat the
-    same policy's return when the apprentice stands in for the target (the
-    target task's own reward and end conditions applied to the apprentice's
-    predicted states, from the same kind of start states). The gap is relative,
-    so ``apprentice.zeta`` is a fraction. The grid world has no vectorised
-    reward model, so Algorithm 2 is not run there (None): TA-TL then fits its
-    apprentice on the whole budget.
+    The target task's own reward and end conditions are applied to the model's
+    predicted states, from the same kind of start states as the target's episodes,
+    for the evaluation protocol's steps. A task without a vectorised reward of the
+    state (``batch_reward``) gets None: Algorithm 2 then cannot run there.
     """
     target = spec.target
     kwargs = {**target.task_kwargs, "random": derive_seed(seed, spec.name, "algorithm2-starts")}
@@ -257,52 +203,80 @@ def utility_gap(spec: ExperimentSpec, preset: Preset, problem: "method.TransferP
     if not hasattr(task, "batch_reward"):
         return None
     starts = np.stack([env.reset().observation["state"] for _ in range(preset.evaluation_episodes)])
-    projected = projected_source_policy(problem)
-    u_true = float(np.mean(evaluate(spec, preset, projected, derive_seed(seed, spec.name, "evaluation"))[0]))
-    actions = np.asarray(problem.target_actions, dtype=np.float64).reshape(len(problem.target_actions), -1)
+    actions = describe(target).action_values
 
-    def gap(apprentice_model) -> float:
+    def model_return(model: Any, policy: Callable) -> float:
         states, total = starts.copy(), np.zeros(len(starts))
         alive = np.ones(len(starts), dtype=bool)
         with np.errstate(all="ignore"):
             for _ in range(preset.evaluation_steps):
-                action = projected(states)
-                states = apprentice_model.predict(states, action if action.ndim == 2 else actions[action])
+                action = policy(states)
+                states = model.predict(states, action if action.ndim == 2 else actions[action])
                 if not np.all(np.isfinite(states)):
-                    return 1e300  # the apprentice diverged: as far from the target as can be
+                    return float("nan")  # the model diverged
                 total += np.where(alive, task.batch_reward(states), 0.0)
                 alive &= ~np.asarray(task.batch_absorbing(states), dtype=bool)
                 if not alive.any():
                     break
-        u_hat = float(total.mean())
-        return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
+        return float(total.mean())
 
-    return gap
+    return model_return
+
+
+def transfer_problem(
+    spec: ExperimentSpec, preset: Preset, artifacts: SourceArtifacts, seed: int,
+) -> "method.TransferProblem":
+    """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its evaluation hooks."""
+    source, target = describe(spec.source), describe(spec.target)
+    eval_seed = derive_seed(seed, spec.name, "evaluation")  # the same start states as every evaluation
+
+    def target_return(policy: Callable) -> float:
+        return float(np.mean(evaluate(spec, preset, policy, eval_seed)[0]))
+
+    return method.TransferProblem(
+        source_q=artifacts.source_q,
+        mapping=artifacts.mapping,
+        source_step=partial(_source_step, spec.source, source),
+        source=source,
+        target=target,
+        seed=derive_seed(seed, spec.name, "target-learning"),
+        target_return=target_return,
+        model_return=_model_return(spec, preset, seed),
+        target_step=partial(_target_step, spec.target, target),
+    )
+
+
+def learned_policy(
+    spec: ExperimentSpec, preset: Preset, seed: int, transfer: Any, artifacts: SourceArtifacts, budget: int,
+    problem: "method.TransferProblem | None" = None,
+) -> Callable:
+    """What ``transfer`` learns from the first ``budget`` target samples of this seed.
+
+    The one path from a method to a policy: evaluation (``run_method``) and clips
+    (``tatl render``) both call it, so a clip shows the evaluated policy.
+    """
+    problem = transfer_problem(spec, preset, artifacts, seed) if problem is None else problem
+    return transfer.learn(problem, artifacts.target_stream.head(budget))
 
 
 def run_method(
     spec: ExperimentSpec, preset: Preset, seed: int, method_name: str, artifacts: SourceArtifacts,
-    methods: dict | None = None,
+    transfer: Any = None,
 ) -> dict:
-    """One method's learning curve for one seed: return against target samples used."""
-    methods = method.METHODS if methods is None else methods
-    if method_name not in methods:
-        raise ValueError(f"unknown method {method_name!r}; valid methods: {sorted(methods)}")
-    transfer = methods[method_name]
-    problem = transfer_problem(spec, artifacts, seed)
-    if method_name == "ta-tl":
-        gap = utility_gap(spec, preset, problem, seed)
-        if gap is not None:
-            problem = dataclasses.replace(
-                problem, utility_gap=gap, zeta=spec.apprentice.zeta, apprentice_batch=preset.target_budgets[0],
-            )
+    """One method's learning curve for one seed: return against target samples used.
+
+    ``transfer`` is the method object (default: the spec's method of that name).
+    """
+    if transfer is None:
+        transfer = methods_from_spec(spec, preset, [method_name])[method_name]
+    problem = transfer_problem(spec, preset, artifacts, seed)
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
     curve = []
     for budget in preset.target_budgets:
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            policy = transfer.learn(problem, artifacts.target_stream.head(budget))
+            policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
         learn_s = time.perf_counter() - start
         start = time.perf_counter()
         returns, lengths = evaluate(spec, preset, policy, eval_seed)
@@ -318,6 +292,7 @@ def run_method(
             "warnings": sorted({str(w.message) for w in caught}),
             "evaluate_s": time.perf_counter() - start,
         })
+    final_used = getattr(policy, "samples_used", None)
     return {
         "experiment": spec.name,
         "seed": seed,
@@ -326,5 +301,5 @@ def run_method(
         "final_return": curve[-1]["mean_return"],
         "random_return": artifacts.random_return,
         "mapping_target_samples": artifacts.mapping_target_samples,
-        "algorithm2_samples": curve[-1]["samples_used"] if method_name == "ta-tl" else None,
+        "algorithm2_samples": None if final_used is None else int(final_used),
     }

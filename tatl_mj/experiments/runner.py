@@ -20,15 +20,16 @@ import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
 from tatl_mj.experiments import pipeline, summary as summary_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, spec_to_dict
+from tatl_mj.transfer import registry
+from tatl_mj.transfer.method import TransferMethod
 
-METHODS = ("ta-tl", "uma-tl", "rl")
 EXECUTORS = ("local", "ray")
 SOURCE_UNIT = "source"
 
@@ -49,7 +50,7 @@ def work(
     """Runs one unit in a worker; never raises (a failure is returned as data).
 
     ``transfer`` is the method object for a method unit (a user's own
-    ``TransferMethod``, or None for the built-in of that name).
+    ``TransferMethod``, or None for the spec's built-in of that name).
     """
     start = time.perf_counter()
     try:
@@ -67,8 +68,7 @@ def work(
         else:
             artifacts = pickle.loads(source_blob)
             blob = None
-            methods = None if transfer is None else {unit.name: transfer}
-            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, methods=methods)
+            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
         record["wall_s"] = time.perf_counter() - start
         return {"record": record, "blob": blob}
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
@@ -162,6 +162,62 @@ def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSp
     write_json(run_dir.manifest, {**manifest, "experiments": experiments})
 
 
+def _plan(
+    specs: list[ExperimentSpec], preset: str, seeds: list[int], methods: Iterable[str] | dict[str, Any] | None,
+) -> tuple[list[Unit], dict[str, Any]]:
+    """Every unit of the run, sources first, and the user's method objects by name.
+
+    ``methods`` None: each spec's own ``[methods]``; names: those built-ins (with
+    the spec's settings where it has them); a dict: name -> method object (None
+    for such a built-in).
+    """
+    custom = {k: v for k, v in methods.items() if v is not None} if isinstance(methods, dict) else {}
+    for name, obj in custom.items():
+        if not isinstance(obj, TransferMethod):
+            raise ValueError(f"method {name!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+    units = []
+    for spec in specs:
+        names = list(spec.methods) if methods is None else list(methods)
+        for name in names:
+            if name not in custom and name not in registry.METHODS:
+                raise ValueError(f"unknown method {name!r}; valid methods: {sorted(registry.METHODS)}")
+        units += [Unit(spec.name, seed, name) for seed in seeds for name in [SOURCE_UNIT, *names]]
+    return units, custom
+
+
+def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job]], Iterator[tuple[Unit, dict]]]:
+    if executor not in EXECUTORS:
+        raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
+    return (lambda jobs: _ray(jobs, workers, address)) if executor == "ray" else (lambda jobs: _local(jobs, workers))
+
+
+class _Recorder:
+    """Writes each finished unit (atomically) and collects failures; only the main process writes."""
+
+    def __init__(self, run_dir: RunDirectory, done: set[Unit], bar: Any) -> None:
+        self.run_dir, self.done, self.bar = run_dir, done, bar
+        self.failures: list[str] = []
+
+    def __call__(self, unit: Unit, result: dict) -> None:
+        run_dir = self.run_dir
+        if "error" in result:
+            path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
+            write_atomic(path, result["error"].encode())
+            last = result["error"].strip().splitlines()[-1]
+            self.failures.append(f"{unit}: {last} (see {path})")
+            self.bar.write(f"FAILED {unit}: {last}")
+        else:
+            if result.get("blob") is not None:
+                write_atomic(run_dir.blob_path(unit.experiment, unit.seed), result["blob"])
+            write_json(run_dir.record_path(unit.experiment, unit.seed, unit.name), result["record"])
+            self.done.add(unit)
+        self.bar.update(1)
+
+    def skip(self, unit: Unit, why: str) -> None:
+        self.failures.append(f"{unit}: skipped, {why}")
+        self.bar.update(1)
+
+
 def run(
     specs: list[ExperimentSpec],
     preset: str,
@@ -170,49 +226,30 @@ def run(
     workers: int = 2,
     executor: str = "local",
     address: str | None = None,
-    methods: Iterable[str] | dict[str, Any] = METHODS,
+    methods: Iterable[str] | dict[str, Any] | None = None,
     progress: bool = True,
 ) -> dict:
     """Runs (or resumes) every unit; writes and returns the summary.
 
-    ``methods`` names built-in methods (``ta-tl``, ``uma-tl``, ``rl``) or maps
-    names to method objects implementing ``tatl_mj.transfer.method.TransferMethod``
-    (they must be picklable to run in worker processes).
+    ``methods``: None runs each spec's own ``[methods]``; a list of names runs
+    those built-ins; a dict maps names to method objects implementing
+    ``tatl_mj.transfer.method.TransferMethod`` (picklable, to run in worker processes).
     """
-    if executor not in EXECUTORS:
-        raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
+    dispatch = _dispatcher(executor, workers, address)
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise ValueError(f"two specs share an experiment name: {names}")
     for spec in specs:
         spec.preset(preset)  # fail before any work on an unknown preset
-    custom = dict(methods) if isinstance(methods, dict) else {}
-    seeds, methods = list(seeds), list(methods)
+    seeds = list(seeds)
+    all_units, custom = _plan(specs, preset, seeds, methods)
     run_dir = RunDirectory(out)
     _check_manifest(run_dir, preset, specs)
     start = time.perf_counter()
-
-    def dispatch(jobs: list[Job]) -> Iterator[tuple[Unit, dict]]:
-        return _ray(jobs, workers, address) if executor == "ray" else _local(jobs, workers)
-
     by_name = {s.name: s for s in specs}
-    all_units = [Unit(s.name, seed, name) for s in specs for seed in seeds for name in [SOURCE_UNIT, *methods]]
     done = {u for u in all_units if run_dir.record_path(u.experiment, u.seed, u.name).exists()}
-    failures: list[str] = []
     bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
-
-    def record(unit: Unit, result: dict) -> None:
-        if "error" in result:
-            path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
-            write_atomic(path, result["error"].encode())
-            failures.append(f"{unit}: {result['error'].strip().splitlines()[-1]} (see {path})")
-            bar.write(f"FAILED {unit}: {result['error'].strip().splitlines()[-1]}")
-        else:
-            if result.get("blob") is not None:
-                write_atomic(run_dir.blob_path(unit.experiment, unit.seed), result["blob"])
-            write_json(run_dir.record_path(unit.experiment, unit.seed, unit.name), result["record"])
-            done.add(unit)
-        bar.update(1)
+    record = _Recorder(run_dir, done, bar)
 
     sources = [u for u in all_units if u.name == SOURCE_UNIT and u not in done]
     for unit, result in dispatch([(u, (by_name[u.experiment], preset, u, None)) for u in sources]):
@@ -222,10 +259,8 @@ def run(
     for unit in all_units:
         if unit.name == SOURCE_UNIT or unit in done:
             continue
-        source = Unit(unit.experiment, unit.seed, SOURCE_UNIT)
-        if source not in done:
-            failures.append(f"{unit}: skipped, its source unit failed")
-            bar.update(1)
+        if Unit(unit.experiment, unit.seed, SOURCE_UNIT) not in done:
+            record.skip(unit, "its source unit failed")
             continue
         blob = run_dir.blob_path(unit.experiment, unit.seed).read_bytes()
         jobs.append((unit, (by_name[unit.experiment], preset, unit, blob, custom.get(unit.name))))
@@ -233,11 +268,11 @@ def run(
         record(unit, result)
     bar.close()
 
+    method_names = list(dict.fromkeys(u.name for u in all_units if u.name != SOURCE_UNIT))
     summary = summary_mod.build(
-        run_dir, specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=methods,
+        run_dir, specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=method_names,
         versions=_versions(), wall_s=time.perf_counter() - start, workers=workers, executor=executor,
-        failures=failures,
+        failures=record.failures,
     )
     write_json(run_dir.summary, summary)
     return summary
-

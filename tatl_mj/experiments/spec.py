@@ -1,17 +1,22 @@
 """Experiment specs: one TOML file per transfer experiment, validated on load.
 
 A spec names the source and target tasks, how the source policy is learned,
-the inter-task mapping, the apprentice, the target learners of the baselines,
-the evaluation protocol and named presets of sample budgets. Any unknown key,
-wrong type or impossible value stops the load with a message naming the file,
-the key and what was expected. See ``tasks/*.toml`` for the five experiments.
+the inter-task mapping, the transfer methods to compare with their settings
+(``[methods.NAME]`` tables, built by ``tatl_mj.transfer.registry``), and named
+presets of sample budgets and evaluation protocol. Validation calls the same
+factories the workers use (``suite.describe``, ``make_regressor``, the method
+constructors), so any unknown key (feature tables included), wrong type,
+impossible value or setting that a choice ignores stops the load with a message
+naming the file, the key path and what was expected. See ``tasks/*.toml``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
+import types
 import typing
 from pathlib import Path
 from typing import Any
@@ -19,7 +24,6 @@ from typing import Any
 SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
 MAPPING_KINDS = ("identity", "manifold_alignment", "affine")
-REGRESSORS = ("linear", "extra_trees")
 
 
 class SpecError(ValueError):
@@ -58,13 +62,19 @@ class Learner:
     regressor: str = "linear"
     gamma: float = 0.95
     iterations: int = 20
-    # Ridge of the linear regressor's least squares; a larger one keeps linear
-    # FQI from diverging on narrow RBFs (mountain car).
-    ridge: float = 1e-6
+    # Ridge of the linear regressor's least squares (default 1e-6); a larger one
+    # keeps linear FQI from diverging on narrow RBFs (mountain car).
+    ridge: float | None = None
+
+    def regressor_spec(self) -> dict:
+        spec: dict = {"kind": self.regressor, "features": self.features}
+        if self.regressor == "linear":
+            spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
+        return spec
 
 
 @dataclasses.dataclass(frozen=True)
-class Mapping:
+class MappingSpec:
     """The inter-task mapping chi (source -> target) and chi_plus (target -> source).
 
     ``identity`` (same state space), ``manifold_alignment`` (learned without
@@ -78,17 +88,6 @@ class Mapping:
     mu: float = 1.0
     matrix: tuple[tuple[float, ...], ...] = ()
     offset: tuple[float, ...] = ()
-
-
-@dataclasses.dataclass(frozen=True)
-class ApprenticeSpec:
-    features: dict = dataclasses.field(default_factory=lambda: {"kind": "linear"})
-    # Algorithm 2 stops once |U_M - U_Mhat| <= zeta * (|U_M| + 1e-9), a relative gap.
-    zeta: float = 0.1
-    adaptive_actions: tuple[float, ...] = ()
-    # Ridge of the apprentice's least squares; > 0 where the basis cannot be
-    # full rank on small budgets (one-hot cells the random walk never visited).
-    ridge: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,9 +107,9 @@ class ExperimentSpec:
     source: Side
     target: Side
     source_learning: Learner
-    mapping: Mapping
-    apprentice: ApprenticeSpec
-    target_learning: Learner
+    mapping: MappingSpec
+    # method name -> its settings (``tatl_mj.transfer.registry``); run in this order.
+    methods: dict
     presets: dict
     path: str = ""
 
@@ -127,6 +126,9 @@ def _fail(path: str, key: str, expected: str, got: Any) -> typing.NoReturn:
 def _convert(value: Any, hint: Any, path: str, key: str) -> Any:
     """Checks ``value`` against a type hint; converts lists to tuples, ints to floats."""
     origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):  # "X | None": TOML has no None, so a given value is an X
+        (inner,) = [arg for arg in typing.get_args(hint) if arg is not type(None)]
+        return _convert(value, inner, path, key)
     if dataclasses.is_dataclass(hint):
         return _build(hint, value, path, key)
     if hint is float:
@@ -185,55 +187,120 @@ def _choice(path: str, key: str, value: str, valid: tuple[str, ...]) -> None:
         raise SpecError(f"{path}: key '{key}' is {value!r}; valid choices: {list(valid)}")
 
 
-def _check(spec: ExperimentSpec) -> None:
-    """Value checks that types alone cannot express."""
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+def _describe(spec: ExperimentSpec, side_name: str) -> Any:
     from tatl_mj import suite  # imports mujoco: only once the spec parsed
 
-    p = spec.path
-    for side_name in ("source", "target"):
-        side: Side = getattr(spec, side_name)
-        if side.domain not in suite.DOMAINS:
-            raise SpecError(f"{p}: key '{side_name}.domain' is {side.domain!r}; valid domains: {sorted(suite.DOMAINS)}")
-        tasks = suite.DOMAINS[side.domain].TASKS
-        if side.task not in tasks:
-            raise SpecError(f"{p}: key '{side_name}.task' is {side.task!r}; valid tasks: {sorted(tasks)}")
-        _choice(p, f"{side_name}.data.sampling", side.data.sampling, SAMPLING_KINDS)
-        if side.data.sampling == "uniform":
-            low, high = side.data.state_low, side.data.state_high
-            if not low or len(low) != len(high) or any(lo >= hi for lo, hi in zip(low, high)):
-                raise SpecError(
-                    f"{p}: keys '{side_name}.data.state_low/state_high' must be equal-length arrays "
-                    f"with low < high for uniform sampling, got {low} and {high}"
-                )
-        if side.data.episode_steps <= 0:
-            _fail(p, f"{side_name}.data.episode_steps", "a positive integer", side.data.episode_steps)
-    for name in ("source_learning", "target_learning"):
-        learner: Learner = getattr(spec, name)
-        _choice(p, f"{name}.method", learner.method, SOURCE_LEARNERS if name == "source_learning" else ("fqi",))
-        _choice(p, f"{name}.regressor", learner.regressor, REGRESSORS)
-        if not 0.0 <= learner.gamma < 1.0:
-            _fail(p, f"{name}.gamma", "in [0, 1)", learner.gamma)
-        if learner.iterations <= 0:
-            _fail(p, f"{name}.iterations", "a positive integer", learner.iterations)
-        if learner.ridge < 0:
-            _fail(p, f"{name}.ridge", "a number >= 0", learner.ridge)
-    if spec.source_learning.method == "q_iteration" and spec.source.domain != "gridworld":
-        raise SpecError(f"{p}: key 'source_learning.method' = 'q_iteration' needs a known model (domain 'gridworld')")
-    _choice(p, "mapping.kind", spec.mapping.kind, MAPPING_KINDS)
-    if spec.mapping.kind == "affine":
-        rows = spec.mapping.matrix
-        if not rows or len({len(r) for r in rows}) != 1 or not rows[0]:
-            _fail(p, "mapping.matrix", "a non-empty array of equal-length rows for kind 'affine'", rows)
-        if spec.mapping.offset and len(spec.mapping.offset) != len(rows):
-            _fail(p, "mapping.offset", f"an array of {len(rows)} numbers (one per matrix row)", spec.mapping.offset)
-    elif spec.mapping.matrix or spec.mapping.offset:
+    p, side = spec.path, getattr(spec, side_name)
+    if side.domain not in suite.DOMAINS:
+        raise SpecError(f"{p}: key '{side_name}.domain' is {side.domain!r}; valid domains: {sorted(suite.DOMAINS)}")
+    tasks = suite.DOMAINS[side.domain].TASKS
+    if side.task not in tasks:
+        raise SpecError(f"{p}: key '{side_name}.task' is {side.task!r}; valid tasks: {sorted(tasks)}")
+    try:
+        return suite.describe(side.domain, side.task, side.task_kwargs)
+    except (TypeError, ValueError) as error:
+        raise SpecError(f"{p}: key '{side_name}.task_kwargs': {error}") from None
+
+
+def _check_side(spec: ExperimentSpec, side_name: str, description: Any) -> None:
+    p, side = spec.path, getattr(spec, side_name)
+    _choice(p, f"{side_name}.data.sampling", side.data.sampling, SAMPLING_KINDS)
+    low, high = side.data.state_low, side.data.state_high
+    if side.data.sampling == "uniform":
+        if len(low) != description.state_dim or len(high) != description.state_dim or any(
+            lo >= hi for lo, hi in zip(low, high)
+        ):
+            raise SpecError(
+                f"{p}: keys '{side_name}.data.state_low/state_high' must be arrays of {description.state_dim} "
+                f"numbers ({', '.join(description.state_names)}) with low < high for uniform sampling, "
+                f"got {list(low)} and {list(high)}"
+            )
+    elif low or high:
+        raise SpecError(f"{p}: keys '{side_name}.data.state_low/state_high' apply to sampling 'uniform' only")
+    if side.data.episode_steps <= 0:
+        _fail(p, f"{side_name}.data.episode_steps", "a positive integer", side.data.episode_steps)
+
+
+def _check_source_learning(spec: ExperimentSpec, description: Any) -> None:
+    from tatl_mj.transfer import fqi
+
+    p, learner = spec.path, spec.source_learning
+    _choice(p, "source_learning.method", learner.method, SOURCE_LEARNERS)
+    if not 0.0 <= learner.gamma < 1.0:
+        _fail(p, "source_learning.gamma", "in [0, 1)", learner.gamma)
+    if learner.method == "q_iteration":
+        if description.known_model is None:
+            raise SpecError(
+                f"{p}: key 'source_learning.method' = 'q_iteration' needs a task with a known model; "
+                f"{spec.source.domain}/{spec.source.task} has none (use 'fqi')"
+            )
+        return
+    _choice(p, "source_learning.regressor", learner.regressor, fqi.REGRESSOR_KINDS)
+    if learner.iterations <= 0:
+        _fail(p, "source_learning.iterations", "a positive integer", learner.iterations)
+    if learner.ridge is not None and learner.regressor != "linear":
+        raise SpecError(f"{p}: key 'source_learning.ridge' applies to regressor 'linear' only")
+    try:
+        fqi.make_regressor(learner.regressor_spec(), description.state_dim)
+    except ValueError as error:
+        raise SpecError(f"{p}: key 'source_learning.features': {error}") from None
+
+
+def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
+    p, mapping = spec.path, spec.mapping
+    _choice(p, "mapping.kind", mapping.kind, MAPPING_KINDS)
+    if mapping.kind == "identity" and source.state_dim != target.state_dim:
+        raise SpecError(
+            f"{p}: key 'mapping.kind' = 'identity' needs equal state sizes, got {source.state_dim} "
+            f"(source) and {target.state_dim} (target)"
+        )
+    if mapping.kind == "affine":
+        rows = mapping.matrix
+        if len(rows) != target.state_dim or any(len(r) != source.state_dim for r in rows):
+            _fail(p, "mapping.matrix", f"{target.state_dim} rows (target: {', '.join(target.state_names)}) of "
+                  f"{source.state_dim} numbers (source: {', '.join(source.state_names)})", rows)
+        if mapping.offset and len(mapping.offset) != len(rows):
+            _fail(p, "mapping.offset", f"an array of {len(rows)} numbers (one per matrix row)", mapping.offset)
+    elif mapping.matrix or mapping.offset:
         raise SpecError(f"{p}: keys 'mapping.matrix' and 'mapping.offset' apply only to kind 'affine'")
-    if spec.mapping.n_neighbors < 1:
-        _fail(p, "mapping.n_neighbors", "a positive integer", spec.mapping.n_neighbors)
-    if spec.apprentice.zeta <= 0:
-        _fail(p, "apprentice.zeta", "a number > 0", spec.apprentice.zeta)
-    if spec.apprentice.ridge < 0:
-        _fail(p, "apprentice.ridge", "a number >= 0", spec.apprentice.ridge)
+    if mapping.kind != "manifold_alignment" and (mapping.n_neighbors, mapping.mu) != (10, 1.0):
+        raise SpecError(f"{p}: keys 'mapping.n_neighbors' and 'mapping.mu' apply only to kind 'manifold_alignment'")
+    if mapping.n_neighbors < 1:
+        _fail(p, "mapping.n_neighbors", "a positive integer", mapping.n_neighbors)
+
+
+def _check_methods(spec: ExperimentSpec, target: Any) -> None:
+    from tatl_mj.transfer import registry
+
+    p = spec.path
+    if not spec.methods:
+        raise SpecError(f"{p}: at least one [methods.NAME] table is required; valid names: {sorted(registry.METHODS)}")
+    for name, settings in spec.methods.items():
+        if not isinstance(settings, dict):
+            _fail(p, f"methods.{name}", "a table of settings", settings)
+        try:
+            method = registry.build(name, settings)
+            check = getattr(method, "check", None)
+            if check is not None:
+                check(target)
+        except ValueError as error:
+            raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
+
+
+def _check(spec: ExperimentSpec) -> None:
+    """Value checks that types alone cannot express, through the factories the workers use."""
+    p = spec.path
+    if not NAME_PATTERN.fullmatch(spec.name):
+        _fail(p, "name", "letters, digits, '_', '.' and '-' (not starting with '.' or '-')", spec.name)
+    source, target = _describe(spec, "source"), _describe(spec, "target")
+    _check_side(spec, "source", source)
+    _check_side(spec, "target", target)
+    _check_source_learning(spec, source)
+    _check_mapping(spec, source, target)
+    _check_methods(spec, target)
     if not spec.presets:
         raise SpecError(f"{p}: at least one [presets.NAME] table is required (e.g. smoke, paper)")
     for name, preset in spec.presets.items():
@@ -244,6 +311,24 @@ def _check(spec: ExperimentSpec) -> None:
         budgets = preset.target_budgets
         if not budgets or any(b <= 0 for b in budgets) or list(budgets) != sorted(set(budgets)):
             _fail(p, f"{key}.target_budgets", "a non-empty strictly increasing array of positive integers", budgets)
+
+
+def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | None = None) -> dict[str, Any]:
+    """Every method of the spec (or the ``names`` among them), built with its settings.
+
+    Algorithm 2's increment (``batch``), where a method has one and the spec leaves
+    it unset, is the preset's smallest target budget.
+    """
+    from tatl_mj.transfer import registry
+
+    chosen = list(spec.methods) if names is None else names
+    out = {}
+    for name in chosen:
+        settings = dict(spec.methods.get(name, {}))
+        if "batch" in registry.settings_of(name) and settings.get("batch") is None:
+            settings["batch"] = min(preset.target_budgets)
+        out[name] = registry.build(name, settings)
+    return out
 
 
 def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:

@@ -17,6 +17,7 @@ from typing import Any
 import dm_env
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import bicycle, cartpole, gridworld, mountain_car, pendulum
 
 DOMAINS: dict[str, ModuleType] = {
@@ -38,6 +39,37 @@ def _domain(name: str) -> ModuleType:
     return DOMAINS[name]
 
 
+def _factory(domain: str, task: str) -> Any:
+    module = _domain(domain)
+    if task not in module.TASKS:
+        raise ValueError(
+            f"unknown task {task!r} for domain {domain!r}; valid tasks: {sorted(module.TASKS)}"
+        )
+    return module.TASKS[task]
+
+
+def _check_task_kwargs(domain: str, task: str, kwargs: dict[str, Any]) -> None:
+    accepted = [
+        name for name, p in inspect.signature(_factory(domain, task)).parameters.items()
+        if name != "environment_kwargs" and p.kind is not p.VAR_KEYWORD
+    ]
+    unknown = sorted(set(kwargs) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}"
+        )
+
+
+def describe(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> TaskDescription:
+    """Static facts about ``domain/task`` (state names, periodic coordinates, action
+    values, limits, control step, a known model), without building or stepping it."""
+    kwargs = dict(task_kwargs or {})
+    _check_task_kwargs(domain, task, kwargs)
+    kwargs.pop("random", None)
+    kwargs.pop("time_limit", None)
+    return _domain(domain).describe(task, **kwargs)
+
+
 def load(
     domain: str,
     task: str,
@@ -51,22 +83,9 @@ def load(
     go to the dm_control ``Environment`` (e.g. ``flat_observation``).
     Unknown names raise ``ValueError`` listing the valid ones.
     """
-    module = _domain(domain)
-    if task not in module.TASKS:
-        raise ValueError(
-            f"unknown task {task!r} for domain {domain!r}; valid tasks: {sorted(module.TASKS)}"
-        )
-    factory = module.TASKS[task]
+    factory = _factory(domain, task)
     kwargs = dict(task_kwargs or {})
-    accepted = [
-        name for name, p in inspect.signature(factory).parameters.items()
-        if name != "environment_kwargs" and p.kind is not p.VAR_KEYWORD
-    ]
-    unknown = sorted(set(kwargs) - set(accepted))
-    if unknown:
-        raise ValueError(
-            f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}"
-        )
+    _check_task_kwargs(domain, task, kwargs)
     random = kwargs.get("random")
     if random is not None and not isinstance(random, np.random.RandomState):
         try:

@@ -62,6 +62,7 @@ import numpy as np
 from dm_env import specs
 from scipy import optimize
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
 # Benchmark geometry (Meijaard et al. 2007, Table 1).
@@ -484,3 +485,12 @@ def stability_window(
     weave = optimize.brentq(lambda v: weave_growth(v, params), *weave_bracket, xtol=1e-4)
     capsize = optimize.brentq(lambda v: capsize_growth(v, params), *capsize_bracket, xtol=1e-4)
     return float(weave), float(capsize)
+
+
+def describe(task: str, **_: Any) -> TaskDescription:
+    """The bicycle's static facts (see ``tatl_mj.description``)."""
+    return TaskDescription(
+        domain="bicycle", task=task, state_names=("steer", "steer_rate", "roll", "roll_rate"),
+        periodic=(False,) * 4, action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-TORQUE_LIMIT]), action_high=np.array([TORQUE_LIMIT]),
+    )

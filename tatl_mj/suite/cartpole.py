@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
 CONTROL_TIMESTEP = 0.02  # s, Gymnasium's tau
@@ -154,3 +155,13 @@ def balance(
 
 
 TASKS = {"balance": balance}
+
+
+def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskDescription:
+    """The cart-pole's static facts (see ``tatl_mj.description``)."""
+    limit = (params or CartPoleParams()).force_limit
+    return TaskDescription(
+        domain="cartpole", task=task, state_names=("x", "x_dot", "theta", "theta_dot"),
+        periodic=(False,) * 4, action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-limit]), action_high=np.array([limit]),
+    )

@@ -58,12 +58,14 @@ Q-iteration; it runs the same step function as the environment.
 from __future__ import annotations
 
 import collections
-from typing import Any
+import functools
+from typing import Any, Callable
 
 import dm_env
 import numpy as np
 from dm_env import specs
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
 LAYOUT: tuple[str, ...] = (
@@ -265,6 +267,62 @@ class GridWorld(dm_env.Environment):
             )
         self._cell = cell
 
+    @property
+    def title(self) -> str:
+        """What the renderer labels this task."""
+        return "windy grid world" if self.windy else "grid world"
+
+    def painter(self, width: int, height: int) -> Callable[[np.ndarray], np.ndarray]:
+        """A function drawing the grid with the agent at ``state`` as a (height, width, 3) uint8 image.
+
+        Free cells, obstacles, the wind band (windy task, one chevron per cell of
+        push), start, goal and the agent; the static part is drawn once.
+        """
+        from PIL import Image, ImageDraw, ImageFont
+
+        band = max(11, round(height / 30)) + 2 * max(4, round(height / 90)) + 4  # room for label strips
+        cell = max(2, min((width - 8) // N_COLS, (height - 2 * band) // N_ROWS))
+        x0, y0 = (width - cell * N_COLS) // 2, (height - cell * N_ROWS) // 2
+        canvas = Image.new("RGB", (width, height), (46, 56, 72))
+        draw = ImageDraw.Draw(canvas)
+        wind = WIND if self.windy else np.zeros(N_COLS, dtype=int)
+        font = ImageFont.load_default(size=max(9, cell // 2))
+
+        def box(row: int, col: int, inset: int = 0) -> tuple[int, int, int, int]:
+            return (x0 + col * cell + inset, y0 + row * cell + inset,
+                    x0 + (col + 1) * cell - 1 - inset, y0 + (row + 1) * cell - 1 - inset)
+
+        for row in range(N_ROWS):
+            for col in range(N_COLS):
+                if OBSTACLES[row, col]:
+                    fill = (70, 70, 78)
+                elif wind[col] > 0:
+                    fill = (205, 225, 250) if wind[col] == 1 else (160, 195, 240)
+                else:
+                    fill = (236, 236, 232)
+                draw.rectangle(box(row, col), fill=fill, outline=(150, 150, 150))
+                if wind[col] > 0 and not OBSTACLES[row, col]:
+                    cx = x0 + col * cell + cell // 2
+                    for i in range(int(wind[col])):
+                        cy = y0 + row * cell + cell // 4 + i * cell // 4
+                        half = max(2, cell // 8)
+                        draw.line([(cx - half, cy + half), (cx, cy), (cx + half, cy + half)],
+                                  fill=(60, 100, 170), width=max(1, cell // 20))
+        for (row, col), fill, text in ((START, (255, 236, 170), "S"), (GOAL, (120, 200, 120), "G")):
+            x_lo, y_lo, x_hi, y_hi = box(row, col)
+            draw.rectangle((x_lo, y_lo, x_hi, y_hi), fill=fill, outline=(150, 150, 150))
+            draw.text(((x_lo + x_hi) / 2, (y_lo + y_hi) / 2), text, font=font, fill=(40, 40, 40), anchor="mm")
+        background = np.array(canvas)
+
+        def show(state: np.ndarray) -> np.ndarray:
+            row, col = (int(v) for v in free_cells()[cell_indices(np.asarray(state)[None])[0]])
+            image = Image.fromarray(background)
+            ImageDraw.Draw(image).ellipse(box(row, col, inset=max(1, cell // 6)),
+                                          fill=(230, 90, 40), outline=(120, 40, 10))
+            return np.array(image)
+
+        return show
+
 
 def _check_environment_kwargs(environment_kwargs: dict[str, Any] | None) -> None:
     if environment_kwargs:
@@ -301,3 +359,18 @@ def windy(
 
 
 TASKS = {"plain": plain, "windy": windy}
+
+
+def describe(task: str, stochastic_wind: bool = False, **_: Any) -> TaskDescription:
+    """The grid world's static facts (see ``tatl_mj.description``).
+
+    Actions are indices; learners see each as its move [d_row, d_col]. The
+    exact model is known unless the wind is stochastic.
+    """
+    windy = task == "windy"
+    return TaskDescription(
+        domain="gridworld", task=task, state_names=("row", "col"), periodic=(False, False),
+        action_values=MOVES.astype(np.float64), discrete=True, control_timestep=None,
+        state_low=np.zeros(2), state_high=np.array([N_ROWS - 1.0, N_COLS - 1.0]),
+        known_model=None if stochastic_wind else functools.partial(transition_model, windy=windy),
+    )

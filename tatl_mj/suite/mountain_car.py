@@ -77,6 +77,7 @@ from typing import Any
 
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
 CONTROL_TIMESTEP = 0.014  # s; 7 physics steps of 2 ms
@@ -288,3 +289,13 @@ def climb(
 
 
 TASKS = {"climb": climb}
+
+
+def describe(task: str, **_: Any) -> TaskDescription:
+    """The mountain car's static facts (see ``tatl_mj.description``)."""
+    return TaskDescription(
+        domain="mountain_car", task=task, state_names=("x", "v"), periodic=(False, False),
+        action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-1.0]), action_high=np.array([1.0]),
+        state_low=np.array([SETTABLE_X[0], -np.inf]), state_high=np.array([SETTABLE_X[1], np.inf]),
+    )

@@ -47,6 +47,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
 CONTROL_TIMESTEP = 0.05  # s
@@ -258,3 +259,17 @@ TASKS = {
     "swingup_timevarying": swingup_timevarying,
     "swingup_flipped": swingup_flipped,
 }
+
+
+def describe(task: str, params: PendulumParams | None = None, **_: Any) -> TaskDescription:
+    """The pendulum's static facts (see ``tatl_mj.description``).
+
+    Mappings measure the angle from hanging (``angle_origin`` pi): random-policy
+    data stay near hanging, which is exactly where theta wraps.
+    """
+    limit = as_params(params).max_torque
+    return TaskDescription(
+        domain="pendulum", task=task, state_names=("theta", "theta_dot"), periodic=(True, False),
+        angle_origin=(math.pi, 0.0), action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-limit]), action_high=np.array([limit]),
+    )

@@ -13,14 +13,15 @@ from tatl_mj.transfer.fqi import (
     ExtraTreesRegressor, LinearQ, LinearRegressor, QFunction, TabularQ, fitted_q_iteration,
     make_regressor, q_iteration,
 )
-from tatl_mj.transfer.method import METHODS, RL, TATL, UMATL, Policy, TransferMethod, TransferProblem
+from tatl_mj.transfer.method import RL, TATL, UMATL, Policy, TargetFQI, TransferMethod, TransferProblem
+from tatl_mj.transfer.registry import METHODS
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy, TATLStep
 
 __all__ = [
     "AffineMapping", "Apprentice", "DiscreteTATLPolicy", "ExtraTreesRegressor", "Features",
     "IdentityMapping", "LinearAlignment", "LinearFeatures", "LinearQ", "LinearRegressor", "METHODS",
     "MappedQ", "Mapping", "OneHot", "Policy", "QFunction", "RBF", "RL", "TATL", "TATLPolicy", "TATLStep",
-    "TabularQ", "TransferMethod", "TransferProblem", "UMATL", "align_manifolds", "fit_apprentice",
+    "TabularQ", "TargetFQI", "TransferMethod", "TransferProblem", "UMATL", "align_manifolds", "fit_apprentice",
     "fitted_q_iteration", "learn_apprentice", "make_features", "make_regressor", "q_iteration", "rl",
     "uma_tl",
 ]

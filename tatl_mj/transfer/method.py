@@ -1,34 +1,43 @@
 """The plug-in interface: what a transfer method gets, and what it must return.
 
-A method is anything with a ``name`` and ``learn(problem, target_samples) -> Policy``
-(the :class:`TransferMethod` protocol). :class:`TransferProblem` bundles everything a
-method may use: the source's Q-function and simulator step, the inter-task mapping,
-both action sets, the target actuator's limits, the basis and regressor settings.
-``target_samples`` are the target transitions the method is allowed to see (its
-budget); a method must not step the target any other way.
+A method is an object with a ``name`` and ``learn(problem, target_samples) -> Policy``
+(the :class:`TransferMethod` protocol), in the scikit-learn style: its settings go
+to its constructor (``TATL(zeta=0.1, apprentice={"kind": "linear"})``), the data to
+``learn``. :class:`TransferProblem` holds the problem only: the source's Q-function
+and simulator step, the inter-task mapping, both tasks' descriptions, and
+evaluation hooks any method may call (so Algorithm 2's utility gap is available to
+every method, built-in or plug-in). ``target_samples`` are the target transitions
+the method is allowed to see (its budget); a method must not step the target any
+other way (the hooks evaluate policies; they never hand out transitions).
 
-The built-ins are :class:`TATL` (the paper's Algorithms 1 and 2), :class:`UMATL` and
-:class:`RL`, listed in the explicit ``METHODS`` dict. To compare your own method,
-pass an instance of it next to these to the experiment runner.
+The built-ins are :class:`TATL` (the paper's Algorithms 1 and 2), :class:`UMATL`
+and :class:`RL`; ``tatl_mj.transfer.registry`` names every built-in. To compare your
+own method, pass an instance of it next to these to the experiment runner.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Protocol, runtime_checkable
+import functools
+import math
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
 from tatl_mj.transfer.baselines import rl, uma_tl
-from tatl_mj.transfer.features import Features
-from tatl_mj.transfer.fqi import QFunction, make_regressor
+from tatl_mj.transfer.features import Features, make_features
+from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, make_regressor
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, SourceStep, TATLPolicy
 from tatl_mj.transitions import Transitions
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Batched target policy: (N, dT) states -> (N, mT) action values, or (N,) indices for a discrete target."""
+
+Model = Any
+"""A target model standing in for the simulator: ``predict(states, action_values) -> next_states``."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -39,60 +48,76 @@ class TransferProblem:
       source_q: Q_S learned on the source (Phase I).
       mapping: chi / chi_plus between the state spaces (Phase II).
       source_step: one batched source-simulator step, (N, dS), (N,) indices -> (N, dS).
-      source_actions: (n, mS) the source's discrete action values.
-      target_actions: (n, mT) the target's; row i corresponds to source row i
-        (Assumption 1). For a discrete target, the values the apprentice uses
-        (e.g. grid moves [d_row, d_col]).
-      target_low, target_high: (mT,) actuator limits (ignored for a discrete target).
-      target_discrete: the target takes action indices, not actuator values.
-      apprentice_features: basis phi for the apprentice (TA-TL); also readable as ``features``.
-      regressor: spec dict for target FQI (``fqi.make_regressor``), used by UMA-TL and RL.
-      gamma, iterations: target FQI's discount and iteration count.
+      source, target: the two tasks' descriptions (``tatl_mj.suite.describe``): state
+        names and periodic coordinates, action values (row i of the source's
+        corresponds to row i of the target's, Assumption 1), actuator limits,
+        control steps, a known model where there is one.
       seed: seeds every random choice a method makes.
-      adaptive_actions: optional (n_ad, mT) admissible set A_ad for TA-TL.
-      utility_gap: optional U_M(pi) - U_Mhat(pi) of Algorithm 2 (needs the target
-        simulator, so the runner builds it); without it TA-TL fits its apprentice
-        on all the samples it is given.
-      zeta: Algorithm 2's threshold on |utility_gap|.
-      apprentice_batch: Algorithm 2's sample increment (default: all samples at once).
-      apprentice_ridge: ridge of the apprentice's least squares (0: plain least squares).
-      apprentice_periodic: per target state coordinate, whether it is an angle
-        (the apprentice then works on wrapped increments; see ``apprentice``).
+      target_return: U_M(pi), the mean return of a policy on the real target under
+        the experiment's evaluation protocol (no target samples are handed out).
+      model_return: U_Mhat(pi), the same policy's mean return when ``model`` stands
+        in for the target (the target task's reward and end conditions applied to
+        the model's predicted states); None where the task has no such reward.
+      target_step: the real target simulator's one step, (N, dT) states, (N, mT)
+        action values -> (N, dT); for oracle ablations only (it is not a sample
+        budget a fair method may use).
     """
 
     source_q: QFunction
     mapping: Mapping
     source_step: SourceStep
-    source_actions: np.ndarray
-    target_actions: np.ndarray
-    target_low: np.ndarray | None
-    target_high: np.ndarray | None
-    target_discrete: bool
-    apprentice_features: Features
-    regressor: dict
-    gamma: float
-    iterations: int
+    source: TaskDescription
+    target: TaskDescription
     seed: int = 0
-    adaptive_actions: np.ndarray | None = None
-    utility_gap: Callable[[Apprentice], float] | None = None
-    zeta: float = 0.0
-    apprentice_batch: int | None = None
-    apprentice_ridge: float = 0.0
-    apprentice_periodic: tuple[bool, ...] | None = None
+    target_return: Callable[[Policy], float] | None = None
+    model_return: Callable[[Model, Policy], float] | None = None
+    target_step: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
-        if not self.target_discrete and (self.target_low is None or self.target_high is None):
-            raise ValueError("TransferProblem.target_low and target_high are required for a continuous target")
-        if not 0.0 <= self.gamma < 1.0:
-            raise ValueError(f"TransferProblem.gamma must be in [0, 1), got {self.gamma!r}")
-
-    @property
-    def features(self) -> Features:
-        return self.apprentice_features
+        if self.source.n_actions != self.target.n_actions:
+            raise ValueError(
+                f"the source has {self.source.n_actions} actions and the target {self.target.n_actions}; "
+                "Assumption 1 pairs them one to one"
+            )
 
     @property
     def n_actions(self) -> int:
-        return len(self.target_actions)
+        return self.target.n_actions
+
+    def projected_source_policy(self) -> Policy:
+        """pi_hat(s_T) = pi*_S(chi_plus(s_T)), carried to the target action of the same index."""
+        source_q, mapping, target = self.source_q, self.mapping, self.target
+
+        def policy(states: np.ndarray) -> np.ndarray:
+            index = source_q.greedy(mapping.chi_plus(states))
+            return index if target.discrete else target.action_values[index]
+
+        return policy
+
+    @property
+    def has_utility_gap(self) -> bool:
+        """Whether Algorithm 2's utility gap can be computed (both hooks given)."""
+        return self.target_return is not None and self.model_return is not None
+
+    @functools.cached_property
+    def _projected_utility(self) -> float:
+        assert self.target_return is not None
+        return float(self.target_return(self.projected_source_policy()))
+
+    def utility_gap(self, model: Model) -> float:
+        """Algorithm 2's relative gap |U_M(pi) - U_Mhat(pi)| / |U_M(pi)| of the projected source policy.
+
+        U_M is computed once per problem; a model whose rollout diverges is as far
+        from the target as can be (1e300).
+        """
+        if not self.has_utility_gap:
+            raise ValueError("this problem has no target_return/model_return hooks: no utility gap")
+        assert self.model_return is not None
+        u_true = self._projected_utility
+        u_hat = self.model_return(model, self.projected_source_policy())
+        if not math.isfinite(u_hat):
+            return 1e300
+        return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
 
 
 @runtime_checkable
@@ -102,6 +127,41 @@ class TransferMethod(Protocol):
     name: str
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy: ...
+
+
+def _check_choice(owner: str, field: str, value: Any, valid: tuple) -> None:
+    if value not in valid:
+        raise ValueError(f"{owner}.{field} is {value!r}; valid choices: {list(valid)}")
+
+
+def _check_number(owner: str, field: str, value: Any, low: float, high: float = math.inf,
+                  low_open: bool = False, high_open: bool = False, integer: bool = False) -> None:
+    kind = "an integer" if integer else "a number"
+    ok_type = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
+    if isinstance(value, bool) or not ok_type or not math.isfinite(value):
+        raise ValueError(f"{owner}.{field} must be {kind}, got {value!r}")
+    if value < low or (low_open and value == low) or value > high or (high_open and value == high):
+        interval = f"{'(' if low_open else '['}{low}, {high}{')' if high_open else ']'}"
+        raise ValueError(f"{owner}.{field} must be in {interval}, got {value!r}")
+
+
+def check_features(owner: str, field: str, spec: Any, state_dim: int | None = None) -> None:
+    """A basis spec's keys and kind are valid (and, given ``state_dim``, its sizes)."""
+    try:
+        make_features(spec, state_dim if state_dim is not None else _probe_dim(spec))
+    except ValueError as error:
+        raise ValueError(f"{owner}.{field}: {error}") from None
+
+
+def _probe_dim(spec: Any) -> int:
+    """A state size that a basis spec can be built with, to check its keys before the task is known."""
+    if isinstance(spec, dict):
+        for key in ("low", "periodic"):
+            if isinstance(spec.get(key), (list, tuple)):
+                return len(spec[key])
+        if spec.get("kind") == "onehot":
+            return 2
+    return 1
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -121,68 +181,150 @@ class GreedyPolicy:
 
 @dataclasses.dataclass(frozen=True)
 class TATL:
-    """Target Apprentice TL: apprentice by Algorithm 2, policy by Algorithm 1."""
+    """Target Apprentice TL, the paper's rule: apprentice by Algorithm 2, policy by Algorithm 1.
 
+    Attributes:
+      apprentice: basis phi of the apprentice s' = W phi(s) + B a (a features spec,
+        ``tatl_mj.transfer.features.make_features``).
+      ridge: ridge of the apprentice's least squares (0: plain least squares).
+      zeta: Algorithm 2's threshold on the relative utility gap; the apprentice grows
+        by ``batch`` samples until the gap is <= zeta. None fits it on every sample.
+      batch: Algorithm 2's sample increment (None: all samples at once).
+      adaptive_actions: the admissible set A_ad (values of a one-dimensional
+        actuator); empty: any value within the actuator limits.
+    """
+
+    apprentice: dict = dataclasses.field(default_factory=lambda: {"kind": "linear"})
+    ridge: float = 0.0
+    zeta: float | None = 0.1
+    batch: int | None = None
+    adaptive_actions: tuple[float, ...] = ()
     name: str = "ta-tl"
 
-    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        actions = np.asarray(problem.target_actions, dtype=np.float64)
-        actions = actions[:, None] if actions.ndim == 1 else actions
-        if problem.utility_gap is None:
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        check_features(owner, "apprentice", self.apprentice)
+        _check_number(owner, "ridge", self.ridge, 0.0)
+        if self.zeta is not None:
+            _check_number(owner, "zeta", self.zeta, 0.0, low_open=True)
+        if self.batch is not None:
+            _check_number(owner, "batch", self.batch, 1, integer=True)
+        for i, value in enumerate(self.adaptive_actions):
+            _check_number(owner, f"adaptive_actions[{i}]", value, -math.inf)
+
+    def check(self, problem_target: TaskDescription) -> None:
+        """Settings that need the target's description (basis size, actuator)."""
+        check_features(type(self).__name__, "apprentice", self.apprentice, problem_target.state_dim)
+        if self.adaptive_actions and problem_target.discrete:
+            raise ValueError(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
+
+    def features(self, target: TaskDescription) -> Features:
+        return make_features(self.apprentice, target.state_dim)
+
+    def fit_apprentice(self, problem: TransferProblem, target_samples: Transitions) -> tuple[Apprentice, int]:
+        """The apprentice on ``target_samples``: by Algorithm 2 where the problem can evaluate
+        the utility gap and ``zeta`` is set, else on every sample. Returns it and the samples used."""
+        target = problem.target
+        actions = target.action_values
+        periodic = target.periodic if any(target.periodic) else None
+        if self.zeta is None or not problem.has_utility_gap:
             apprentice = fit_apprentice(
                 target_samples.states, actions[target_samples.actions], target_samples.next_states,
-                problem.apprentice_features, problem.apprentice_ridge, periodic=problem.apprentice_periodic,
+                self.features(target), self.ridge, periodic=periodic,
             )
-            used = len(target_samples)
-        else:
-            apprentice, used = learn_apprentice(
-                target_samples, actions, problem.apprentice_features, problem.utility_gap, problem.zeta,
-                problem.apprentice_batch or len(target_samples), problem.apprentice_ridge,
-                periodic=problem.apprentice_periodic,
-            )
+            return apprentice, len(target_samples)
+        return learn_apprentice(
+            target_samples, actions, self.features(target), problem.utility_gap, self.zeta,
+            self.batch or len(target_samples), self.ridge, periodic=periodic,
+        )
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        apprentice, used = self.fit_apprentice(problem, target_samples)
+        target = problem.target
+        adaptive = np.asarray(self.adaptive_actions, dtype=np.float64).reshape(-1, 1) if self.adaptive_actions else None
         common = dict(
             source_q=problem.source_q, mapping=problem.mapping, source_step=problem.source_step,
-            apprentice=apprentice, source_actions=problem.source_actions, target_actions=actions,
-            target_low=problem.target_low, target_high=problem.target_high,
-            adaptive_actions=problem.adaptive_actions, samples_used=used,
+            apprentice=apprentice, source_actions=problem.source.action_values, target_actions=target.action_values,
+            target_low=target.action_low, target_high=target.action_high,
+            adaptive_actions=adaptive, samples_used=used,
         )
-        return DiscreteTATLPolicy(**common) if problem.target_discrete else TATLPolicy(**common)
-
-
-def _target_fqi(problem: TransferProblem, target_samples: Transitions, initial: Mapping | None) -> Policy:
-    """Target FQI on ``target_samples`` (from the mapped source Q when ``initial`` is a mapping)."""
-    regressor = make_regressor(problem.regressor, target_samples.state_dim)
-    rng = np.random.default_rng(problem.seed)
-    if initial is None:
-        q = rl(target_samples, problem.n_actions, regressor, problem.gamma, problem.iterations, rng=rng)
-    else:
-        q = uma_tl(
-            problem.source_q, initial, target_samples, problem.n_actions, regressor,
-            problem.gamma, problem.iterations, rng=rng,
-        )
-    return GreedyPolicy(q, problem.target_actions, problem.target_discrete)
+        return DiscreteTATLPolicy(**common) if target.discrete else TATLPolicy(**common)
 
 
 @dataclasses.dataclass(frozen=True)
-class UMATL:
+class TargetFQI:
+    """Settings of target Fitted Q-Iteration, shared by :class:`UMATL` and :class:`RL`.
+
+    Attributes:
+      features: basis of the linear regressor (a features spec, default linear);
+        refused for extra-trees, which split raw states.
+      regressor: ``"linear"`` or ``"extra_trees"``.
+      ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
+      gamma, iterations: FQI's discount and iteration count.
+    """
+
+    features: dict | None = None
+    regressor: str = "linear"
+    ridge: float | None = None
+    gamma: float = 0.95
+    iterations: int = 20
+    name: str = "target-fqi"
+    from_source = False  # UMA-TL starts from the mapped source Q
+
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        _check_choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
+        for field in ("ridge", "features"):
+            if getattr(self, field) is not None and self.regressor != "linear":
+                raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
+        if self.ridge is not None:
+            _check_number(owner, "ridge", self.ridge, 0.0)
+        if self.regressor == "linear":
+            check_features(owner, "features", self.linear_features)
+        _check_number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
+        _check_number(owner, "iterations", self.iterations, 1, integer=True)
+
+    @property
+    def linear_features(self) -> dict:
+        return {"kind": "linear"} if self.features is None else self.features
+
+    def check(self, problem_target: TaskDescription) -> None:
+        if self.regressor == "linear":
+            check_features(type(self).__name__, "features", self.linear_features, problem_target.state_dim)
+
+    def regressor_spec(self) -> dict:
+        spec: dict = {"kind": self.regressor, "features": self.linear_features}
+        if self.regressor == "linear":
+            spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
+        return spec
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        regressor = make_regressor(self.regressor_spec(), target_samples.state_dim)
+        rng = np.random.default_rng(problem.seed)
+        if self.from_source:
+            q = uma_tl(problem.source_q, problem.mapping, target_samples, problem.n_actions, regressor,
+                       self.gamma, self.iterations, rng=rng)
+        else:
+            q = rl(target_samples, problem.n_actions, regressor, self.gamma, self.iterations, rng=rng)
+        return GreedyPolicy(q, problem.target.action_values, problem.target.discrete)
+
+
+@dataclasses.dataclass(frozen=True)
+class UMATL(TargetFQI):
     """UMA-TL: target FQI initialised with the mapped source Q (Ammar et al. 2015)."""
 
     name: str = "uma-tl"
-
-    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        return _target_fqi(problem, target_samples, problem.mapping)
+    from_source = True
 
 
 @dataclasses.dataclass(frozen=True)
-class RL:
+class RL(TargetFQI):
     """No transfer: target FQI from scratch."""
 
     name: str = "rl"
 
-    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        return _target_fqi(problem, target_samples, None)
 
-
-METHODS: dict[str, TransferMethod] = {"ta-tl": TATL(), "uma-tl": UMATL(), "rl": RL()}
-
-__all__ = ["GreedyPolicy", "METHODS", "Policy", "RL", "TATL", "TransferMethod", "TransferProblem", "UMATL"]
+__all__ = [
+    "GreedyPolicy", "Model", "Policy", "RL", "TATL", "TargetFQI", "TransferMethod", "TransferProblem", "UMATL",
+    "check_features",
+]

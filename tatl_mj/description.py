@@ -1,0 +1,121 @@
+"""What a task is, as transfer methods see it, without stepping anything.
+
+Every suite domain provides ``describe(task, **task_kwargs) -> TaskDescription``
+(``tatl_mj.suite.describe`` dispatches), so the experiment pipeline, the
+sampler, the renderer and transfer methods never special-case a domain by
+name: the grid world's moves, its known model, the pendulum's periodic angle
+and the mountain car's settable track all come from here.
+
+Pure numpy: ``tatl_mj.transfer`` imports it without importing mujoco.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import numpy as np
+
+KnownModel = Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+"""A deterministic tabular model: () -> (next_state (S, A) int, reward (S, A), absorbing (S, A) bool,
+cells (S, d) the state vector of each index)."""
+
+
+def _floats(values, name: str, n: int | None = None) -> np.ndarray:
+    a = np.asarray(values, dtype=np.float64)
+    if n is not None and a.shape != (n,):
+        raise ValueError(f"TaskDescription.{name} must have {n} entries, got shape {a.shape}")
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TaskDescription:
+    """Static facts about one ``domain/task`` (with its task kwargs).
+
+    Attributes:
+      domain, task: the suite names.
+      state_names: one name per entry of the paper's state vector (its size is ``state_dim``).
+      periodic: per state entry, whether it is an angle wrapped to [-pi, pi).
+      angle_origin: per state entry, where a mapping should measure a periodic
+        coordinate from (e.g. the pendulum's hanging angle, pi, so that random
+        data near hanging do not straddle the wrap); 0 elsewhere.
+      action_values: (n, m) the paper's discrete action set as learners see it:
+        actuator values, or for a ``discrete`` task the effect of each index
+        (the grid world's moves [d_row, d_col]).
+      discrete: the environment takes action indices, not actuator values.
+      action_low, action_high: (m,) actuator limits (None for a discrete task).
+      state_low, state_high: (d,) the range ``set_state_vector`` accepts
+        (-inf/inf where unlimited); a source simulator is queried inside it.
+      control_timestep: seconds per control step (None where steps have no duration).
+      known_model: the task's exact tabular model when it has one (else None).
+    """
+
+    domain: str
+    task: str
+    state_names: tuple[str, ...]
+    periodic: tuple[bool, ...]
+    action_values: np.ndarray
+    discrete: bool
+    control_timestep: float | None
+    action_low: np.ndarray | None = None
+    action_high: np.ndarray | None = None
+    angle_origin: tuple[float, ...] | None = None
+    state_low: np.ndarray | None = None
+    state_high: np.ndarray | None = None
+    known_model: KnownModel | None = None
+
+    def __post_init__(self) -> None:
+        d = len(self.state_names)
+        if len(self.periodic) != d:
+            raise ValueError(f"TaskDescription.periodic must have {d} entries, got {len(self.periodic)}")
+        actions = np.asarray(self.action_values, dtype=np.float64)
+        actions = actions[:, None] if actions.ndim == 1 else actions
+        object.__setattr__(self, "action_values", actions)
+        origin = (0.0,) * d if self.angle_origin is None else tuple(float(v) for v in self.angle_origin)
+        if len(origin) != d or any(o != 0 and not p for o, p in zip(origin, self.periodic)):
+            raise ValueError(f"TaskDescription.angle_origin must have {d} entries, non-zero only where periodic")
+        object.__setattr__(self, "angle_origin", origin)
+        low = _floats(-np.inf * np.ones(d) if self.state_low is None else self.state_low, "state_low", d)
+        high = _floats(np.inf * np.ones(d) if self.state_high is None else self.state_high, "state_high", d)
+        object.__setattr__(self, "state_low", low)
+        object.__setattr__(self, "state_high", high)
+        if not self.discrete:
+            m = actions.shape[1]
+            if self.action_low is None or self.action_high is None:
+                raise ValueError("TaskDescription.action_low/action_high are required for a continuous task")
+            object.__setattr__(self, "action_low", _floats(self.action_low, "action_low", m))
+            object.__setattr__(self, "action_high", _floats(self.action_high, "action_high", m))
+        if self.control_timestep is not None and not (
+            math.isfinite(self.control_timestep) and self.control_timestep > 0
+        ):
+            raise ValueError(f"TaskDescription.control_timestep must be > 0 s, got {self.control_timestep!r}")
+
+    @property
+    def state_dim(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_actions(self) -> int:
+        return len(self.action_values)
+
+    @property
+    def action_dim(self) -> int:
+        return self.action_values.shape[1]
+
+    def clip_to_settable(self, states: np.ndarray) -> np.ndarray:
+        """``states`` moved to the nearest state ``set_state_vector`` accepts."""
+        return np.clip(states, self.state_low, self.state_high)
+
+
+def cell_rows(cells: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """(N,) row of ``cells`` (S, d) equal to each of ``states`` (N, d); ValueError naming a state that is none."""
+    index = {tuple(row): i for i, row in enumerate(np.asarray(cells, dtype=np.float64).tolist())}
+    s = np.asarray(states, dtype=np.float64).reshape(-1, np.shape(cells)[1])
+    rows = np.array([index.get(tuple(row), -1) for row in s.tolist()], dtype=np.int64)
+    if np.any(rows < 0):
+        raise ValueError(f"state {s[rows < 0][0].tolist()} is not a state of the known model")
+    return rows
+
+
+__all__ = ["KnownModel", "TaskDescription", "cell_rows"]

@@ -1,0 +1,60 @@
+"""The one list of built-in transfer methods, by the names specs, the CLI and reports use.
+
+Each name maps to a factory that takes the method's settings as keyword
+arguments (an experiment spec's ``[methods.NAME]`` table) and returns the method
+object. A plug-in method is any object with ``name`` and ``learn`` (see
+``tatl_mj.transfer.method``); it needs no entry here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any, Callable
+
+from tatl_mj.transfer.method import RL, TATL, UMATL, TransferMethod
+
+METHODS: dict[str, Callable[..., TransferMethod]] = {
+    "ta-tl": TATL,
+    "uma-tl": UMATL,
+    "rl": RL,
+}
+"""Built-in methods: name -> factory(**settings)."""
+
+BASELINES = ("uma-tl", "rl")
+"""The paper's comparison methods (reports compare every other method with them)."""
+
+
+def settings_of(name: str) -> tuple[str, ...]:
+    """The setting names a built-in method accepts (its constructor's fields, bar those fixed by the name)."""
+    factory = _factory(name)
+    fixed = set(factory.keywords) if isinstance(factory, functools.partial) else set()
+    cls = factory.func if isinstance(factory, functools.partial) else factory
+    return tuple(f.name for f in dataclasses.fields(cls) if f.init and f.name != "name" and f.name not in fixed)
+
+
+def _factory(name: str) -> Callable[..., TransferMethod]:
+    if name not in METHODS:
+        raise ValueError(f"unknown method {name!r}; valid methods: {sorted(METHODS)}")
+    return METHODS[name]
+
+
+def _plain(value: Any) -> Any:
+    """TOML arrays as tuples (settings are frozen), tables left as dicts."""
+    if isinstance(value, list):
+        return tuple(_plain(v) for v in value)
+    return value
+
+
+def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
+    """The built-in method ``name`` with ``settings``; ValueError naming an unknown or bad setting."""
+    factory = _factory(name)
+    settings = dict(settings or {})
+    valid = settings_of(name)
+    unknown = sorted(set(settings) - set(valid))
+    if unknown:
+        raise ValueError(f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: {sorted(valid)}")
+    return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
+
+
+__all__ = ["BASELINES", "METHODS", "build", "settings_of"]
