@@ -30,7 +30,8 @@ Rider noise        every control step the 60 kg rider's centre of gravity
                    Randlov & Alstrom 1998 do. It acts as the displaced
                    weight's extra moment d y x (-m g z) (a couple, exact in
                    any pose); nothing moves, so no reaction shakes the
-                   frame. Roll-rate kick per step: about 1e-3 rad/s.
+                   frame. RMS kick per step at 2 cm: roll rate 1.1e-3
+                   rad/s, steer rate 8e-3 rad/s (docs/bicycle.md).
 Reward             +1 for every step that ends upright, 0 on the step that
                    ends in a fall (as the cart-pole source task), so the
                    return counts control steps balanced (x 0.01 s = the
@@ -454,9 +455,9 @@ def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settl
     holds ``speed``), then MuJoCo's finite-difference linearisation of one physics
     step (``mjd_transitionFD``, centred) gives the discrete map, whose eigenvalues
     mu become ``log(mu) / timestep``. Kept: the benchmark's modes (weave, capsize,
-    castor); dropped: neutral directions (position, yaw,
-    wheel angles, |lambda| < 2e-5), the speed servo's mode and contact modes
-    (|lambda| > 40). Sorted by real part.
+    castor); dropped: neutral directions (position, yaw, wheel angles,
+    |lambda| < 2e-5), the speed servo's mode and contact modes (|lambda| > 40).
+    Sorted by real part.
     """
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be a positive number of m/s, got {speed!r}")
