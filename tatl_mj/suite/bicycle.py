@@ -3,9 +3,9 @@
 The bicycle of Meijaard, Papadopoulos, Ruina & Schwab (2007, Proc. R. Soc. A 463,
 "Linearized dynamics equations for the balance and steer of a bicycle: a benchmark
 and review"), built from rigid bodies whose two knife-edge tyres roll on the floor
-through MuJoCo contacts. A rear-wheel speed servo holds the forward speed, a rider
-shifts sideways at random (Randlov & Alstrom 1998) and the agent applies a torque to
-the handlebar. The paper's target task for transfer from the cart-pole.
+through MuJoCo contacts. A rear-wheel speed servo holds the forward speed, the
+rider's centre of gravity is displaced sideways at random (Randlov & Alstrom 1998)
+and the agent applies a torque to the handlebar. The paper's target task for transfer from the cart-pole.
 
 =================  ==========================================================
 State              ``[theta, theta_dot, omega, omega_dot]`` (float64)
@@ -20,14 +20,18 @@ State              ``[theta, theta_dot, omega, omega_dot]`` (float64)
 Actions            ``ACTIONS = [[-2], [0], [2]]``: handlebar torque (N m),
                    positive turns the handlebar to the right. The actuator
                    accepts any torque in +-2 N m (action spec shape (1,)).
-Control vector     ``ctrl = [steer torque (N m), rider shift set-point (m,
-                   +y = left), forward speed set-point (m/s)]``; the task
-                   fills in the last two (``Task.controls``).
-Rider noise        every control step the rider's centre of gravity is sent
-                   to a sideways offset uniform in +-``cg_noise`` (default
-                   0.02 m) drawn from the task's ``random`` (nothing is
-                   drawn when ``cg_noise = 0``); a stiff position servo
-                   (10 Hz, critically damped) moves the 60 kg rider.
+Control vector     ``ctrl = [steer torque (N m), rider CG offset d (m, +y =
+                   left), the same d, forward speed set-point (m/s)]``; the
+                   task fills in the last three (``Task.controls``).
+Rider noise        every control step the 60 kg rider's centre of gravity
+                   is displaced sideways by d, drawn anew uniform in
+                   +-``cg_noise`` (default 0.02 m) from the task's
+                   ``random`` (nothing is drawn when ``cg_noise = 0``), as
+                   Randlov & Alstrom 1998 do. It acts as the displaced
+                   weight's extra moment d y x (-m g z) (a couple, exact in
+                   any pose); nothing moves, so no reaction shakes the
+                   frame. RMS kick per step at 2 cm: roll rate 1.1e-3
+                   rad/s, steer rate 8e-3 rad/s (docs/bicycle.md).
 Reward             +1 for every step that ends upright, 0 on the step that
                    ends in a fall (as the cart-pole source task), so the
                    return counts control steps balanced (x 0.01 s = the
@@ -43,7 +47,8 @@ Parameters         ``speed`` (m/s, default 2.778 = 10 km/h, below the
                    benchmark's self-stable window 4.29..6.02 m/s),
                    ``cg_noise`` (m, default 0.02), :class:`BicycleParams`:
                    tyre_half_width 0.005 m, rider_mass 60 kg (of the rear
-                   body's 85), tyre_friction 1.2, gravity 9.81 m/s^2.
+                   body's 85; the mass whose weight d displaces),
+                   tyre_friction 1.2, gravity 9.81 m/s^2.
 =================  ==========================================================
 
 Geometry and masses are the benchmark's Table 1 (see ``assets/mjcf/bicycle.xml``);
@@ -82,7 +87,8 @@ _PITCH_TOLERANCE = 1e-14  # rad, last Newton step of frame_pitch
 _PITCH_DELTA = 1e-6  # rad, central difference for its slope
 _PITCH_MAX_ITERATIONS = 50
 START_ROLL = math.radians(1.0)  # rad, start roll uniform in +-START_ROLL
-MAX_CG_NOISE = 0.25  # m, the rider servo's range
+MAX_CG_NOISE = 0.25  # m, the CG actuators' control range
+CG_ARM = 0.5  # m, half the distance between the two forces of the rider's couple
 TORQUE_LIMIT = 2.0  # N m
 
 ACTIONS = np.array([[-TORQUE_LIMIT], [0.0], [TORQUE_LIMIT]])
@@ -106,9 +112,8 @@ class BicycleParams:
     tyre_half_width: float = common.positive(
         0.005, "half-width of the ellipsoid tyres (m); crown radius is width^2 / radius"
     )
-    rider_mass: float = common.positive(60.0, "rider's share of the 85 kg rear body (kg)")
-    rider_servo_hz: float = common.positive(
-        10.0, "natural frequency of the critically damped servo that shifts the rider (Hz)"
+    rider_mass: float = common.positive(
+        60.0, "rider's share of the 85 kg rear body (kg), the mass the CG noise displaces"
     )
     tyre_friction: float = common.positive(1.2, "tyre-floor sliding friction coefficient")
     gravity: float = common.positive(9.81, "gravitational acceleration (m/s^2)")
@@ -134,8 +139,9 @@ def model_xml(params: BicycleParams | None = None) -> tuple[str, dict[str, bytes
         root.find(f".//body[@name='{body}']/inertial").attrib.update(
             mass=repr(mass), fullinertia=" ".join(repr(float(v)) for v in inertia * mass / REAR_BODY_MASS)
         )
-    kp, kv = _servo_gains(params.rider_mass, params.rider_servo_hz)
-    root.find(".//position[@name='rider_shift']").attrib.update(kp=repr(kp), kv=repr(kv))
+    weight = cg_force_per_metre(params)
+    for name, sign in (("cg_left", -1.0), ("cg_right", 1.0)):
+        root.find(f".//motor[@name='{name}']").set("gear", f"0 0 {sign * weight!r} 0 0 0")
     for name, radius in (("rear_tyre", REAR_RADIUS), ("front_tyre", FRONT_RADIUS)):
         root.find(f".//geom[@name='{name}']").set(
             "size", f"{radius!r} {params.tyre_half_width!r} {radius!r}"
@@ -146,10 +152,15 @@ def model_xml(params: BicycleParams | None = None) -> tuple[str, dict[str, bytes
     return ET.tostring(root, encoding="unicode"), assets
 
 
-def _servo_gains(mass: float, hertz: float) -> tuple[float, float]:
-    """Stiffness and damping of a critically damped position servo moving ``mass``."""
-    w = 2.0 * math.pi * hertz
-    return mass * w * w, 2.0 * mass * w
+def cg_force_per_metre(params: BicycleParams | None = None) -> float:
+    """Force (N) per metre of rider CG offset at each site of the couple: m g / (2 L).
+
+    The forces -+ f d (world z) at the points L to the left and right of the
+    rider's centre of mass make the couple d y x (-m g z), the moment by which
+    the rider's weight moved d along the frame's y axis differs from it centred.
+    """
+    params = params or BicycleParams()
+    return params.rider_mass * params.gravity / (2.0 * CG_ARM)
 
 
 # --- Geometry of the upright-ish bicycle (vectorised) -------------------------
@@ -255,7 +266,7 @@ class Physics(common.StatePhysics):
         """Puts the bicycle at the origin heading +x, both tyres on the floor, rolling without slip.
 
         The rear contact moves forward at :meth:`target_speed`; the frame pitch, yaw
-        rate and wheel rates follow from the rolling constraints. The rider is centred.
+        rate and wheel rates follow from the rolling constraints.
         """
         s = np.atleast_2d(np.asarray(states, np.float64))
         n = len(s)
@@ -352,13 +363,20 @@ class Physics(common.StatePhysics):
         heading /= np.linalg.norm(heading)
         return float(np.dot(self.named.data.qvel["root"][:3], heading))
 
-    def rider_offset(self) -> float:
-        """Rider's sideways shift from the frame's centre plane (m, positive to the left)."""
-        return float(self.named.data.qpos["rider_shift"][0])
+    def cg_offset(self) -> float:
+        """Rider's centre-of-gravity offset acting this step (m, positive to the left)."""
+        return float(self.named.data.ctrl["cg_left"])
 
     def steer_torque(self) -> float:
         """Handlebar torque the actuator applies now (N m), after clipping."""
         return float(self.named.data.actuator_force["steer_torque"])
+
+
+def control_vector(torque: Any, cg_offset: Any, speed: float) -> np.ndarray:
+    """(N, 4) ctrl rows: handlebar torque (N m), CG offset d (m) twice, speed set-point (m/s)."""
+    torque, cg_offset = np.broadcast_arrays(np.atleast_1d(np.asarray(torque, np.float64)),
+                                            np.atleast_1d(np.asarray(cg_offset, np.float64)))
+    return np.column_stack([torque, cg_offset, cg_offset, np.full(len(torque), float(speed))])
 
 
 class Task(common.StateTask):
@@ -385,8 +403,11 @@ class Task(common.StateTask):
         n = len(torque)
         # No noise, no draws: start states then do not depend on how many
         # steps were taken between resets (the sampler's lockstep episodes).
-        rider = random.uniform(-self.cg_noise, self.cg_noise, size=n) if self.cg_noise else np.zeros(n)
-        return np.column_stack([torque[:, 0], rider, np.full(n, self.speed)])
+        # A new offset every control step (Randlov & Alstrom 1998): i.i.d. noise
+        # on the transition, carried by ctrl alone, so the batched sampler and
+        # mujoco.rollout replay episodes exactly.
+        offset = random.uniform(-self.cg_noise, self.cg_noise, size=n) if self.cg_noise else np.zeros(n)
+        return control_vector(torque[:, 0], offset, self.speed)
 
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
         physics.set_target_speed(self.speed)  # qpos_qvel_from reads it
@@ -396,7 +417,7 @@ class Task(common.StateTask):
 
     def initialize_episode(self, physics: Physics) -> None:
         super().initialize_episode(physics)
-        physics.data.ctrl[:] = [0.0, 0.0, self.speed]
+        physics.data.ctrl[:] = control_vector(0.0, 0.0, self.speed)[0]
 
     def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
         return np.abs(np.asarray(states, np.float64)[:, 2]) > ROLL_LIMIT
@@ -435,9 +456,9 @@ def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settl
     holds ``speed``), then MuJoCo's finite-difference linearisation of one physics
     step (``mjd_transitionFD``, centred) gives the discrete map, whose eigenvalues
     mu become ``log(mu) / timestep``. Kept: the benchmark's modes (weave, capsize,
-    castor) and any slow rider mode; dropped: neutral directions (position, yaw,
-    wheel angles, |lambda| < 2e-5), the speed servo's mode and contact modes
-    (|lambda| > 40). Sorted by real part.
+    castor); dropped: neutral directions (position, yaw, wheel angles,
+    |lambda| < 2e-5), the speed servo's mode and contact modes (|lambda| > 40).
+    Sorted by real part.
     """
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be a positive number of m/s, got {speed!r}")
@@ -445,7 +466,7 @@ def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settl
     physics.set_target_speed(speed)
     model, data = physics.model.ptr, physics.data.ptr
     qpos, qvel = physics.qpos_qvel_from(np.zeros((1, Physics.STATE_SIZE)))
-    data.qpos[:], data.qvel[:], data.ctrl[:] = qpos[0], qvel[0], [0.0, 0.0, speed]
+    data.qpos[:], data.qvel[:], data.ctrl[:] = qpos[0], qvel[0], control_vector(0.0, 0.0, speed)[0]
     for _ in range(int(round(settle / model.opt.timestep))):
         mujoco.mj_step(model, data)
     transition = np.zeros((2 * model.nv + model.na, 2 * model.nv + model.na))
