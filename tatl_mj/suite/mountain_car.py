@@ -1,8 +1,8 @@
 """Mountain car climb: an under-powered car must rock back and forth to leave a valley.
 
 The classic problem (Moore 1990; Sutton & Barto) as a real MuJoCo simulation: a
-car slides without friction on a heightfield shaped like the classic hill
-``h(x) = 0.45 sin(3x) + 0.55`` and is pushed by a horizontal force too weak to
+car is held by a linkage on the classic hill ``h(x) = 0.45 sin(3x) + 0.55``
+(drawn as a heightfield), moves without friction, and is pushed by a horizontal force too weak to
 climb the right slope directly. The paper's source task for the pendulum swing-up.
 
 =================  ==========================================================
@@ -30,14 +30,17 @@ Episode end        goal, with discount 0: ``x >= 0.5``; otherwise the time
                    limit (default 5.6 s = 400 control steps, twice the classic
                    200, because the real dynamics climb a little more slowly),
                    which is not a failure.
-Timing             control step 0.014 s; physics step 0.002 s (RK4), so seven
-                   physics steps per action.
+Timing             control step 0.014 s; one RK4 physics step of 0.014 s
+                   per action (nothing stiff is simulated).
 Parameters         :class:`MountainCarParams`: car_mass 1 kg, force 5.3 N,
                    gravity 9.81 m/s^2, damping 0 N s/m (viscous, on x).
 =================  ==========================================================
 
-Physics. The wheel (a 3 cm sphere) is the only colliding part; its centre moves
-on ``z = h(x) + r``, so with no damping the motion is that of a bead on the
+Physics. A crank and a rocker, tied to x by hard joint equalities, hold the
+wheel centre (3 cm wheel) exactly on ``z = h(x) + r`` and keep the car level,
+and the mass is split between the car, a vertically moving slider and the two
+spinning links so that the whole acts as one point mass m on the curve
+(assets/mjcf/mountain_car.xml, ``BALLAST``). So the motion is that of a bead on the
 classic curve::
 
     m (1 + h'^2) x_dd + m h' h'' x_d^2 = F - m g h'(x) - c x_d
@@ -54,19 +57,14 @@ full throttle from the valley stalls on the right slope (it would need
 
 Measured (tests/test_mountain_car.py): full throttle from the start set
 peaks at x = -0.15; pushing along the velocity reaches the goal in 150 to 170
-steps. Over 100 steps the simulated x stays within 1 mm of the bead equation
-above solved by scipy.
+steps. Over 100 steps the simulated x stays within 4 um of the bead equation
+above solved by scipy (the heightfield version: 0.8 mm); the wheel centre stays
+within 0.01 mm of ``h(x) + r`` and the energy of free rolling within 1e-4 of
+the swing over 10 s.
 
-Contact choices (see ``assets/mjcf/mountain_car.xml``): the hill is a 1 mm
-heightfield on which the wheel centre rides exactly on ``h(x) + r``; an
-upside-down, hidden heightfield 0.5 mm above the wheel keeps the car on the
-track where it would fly off the crest near the goal; both contacts are
-frictionless and undamped (a stiff spring, 3e5 m/s^2 per m), because any
-damping turns the facets' small normal velocities into a steady energy loss.
-The wall's face is square to the track and its contact stiff and over-damped,
-so the car stops there as in the classic task. With no force and no damping
-the energy drifts by under 0.5% in 10 s, and the wheel centre stays within
-1 mm of ``h(x) + r``.
+The wall is a hard, over-damped lower limit on x at -1.2, which stops motion
+along the track as the classic task's wall does; evaluated once per 14 ms step,
+it gives up to about 3 cm when the car hits it fast (pushed left at full speed).
 """
 
 from __future__ import annotations
@@ -75,12 +73,13 @@ import dataclasses
 import xml.etree.ElementTree as ET
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
 
-CONTROL_TIMESTEP = 0.014  # s; 7 physics steps of 2 ms
+CONTROL_TIMESTEP = 0.014  # s; one RK4 physics step
 VELOCITY_SCALE = CONTROL_TIMESTEP  # v (m per control step) = x_dot (m/s) * this
 DEFAULT_TIME_LIMIT = 400 * CONTROL_TIMESTEP  # s, 400 control steps
 GOAL_X = 0.5  # m
@@ -88,8 +87,8 @@ X_MIN, X_MAX = -1.2, 0.6  # m, classic position range (the wall is at X_MIN)
 V_MAX = 0.07  # classic velocity bound (m per control step), not enforced
 START_RANGE = (-0.6, -0.4)  # m
 # Positions a state may be set to: the classic range plus room for the wall's
-# give (the car presses up to 8 mm into it) and past the goal; the track's
-# heightfields run over [-1.35, 0.85].
+# give (the car presses up to about 3 cm into it) and past the goal; the drawn
+# heightfield runs over [-1.35, 0.85].
 SETTABLE_X = (-1.25, 0.8)  # m
 
 ACTIONS = np.array([[-1.0], [0.0], [1.0]])
@@ -126,25 +125,28 @@ class MountainCarParams:
 
 
 def model_xml(params: MountainCarParams | None = None) -> tuple[str, dict[str, bytes]]:
-    """The MJCF text (with ``params`` written in) and its include files."""
+    """The MJCF text (with ``params`` and the hill's shape written in) and its include files."""
     params = MountainCarParams() if params is None else params
     root, assets = common.parse_model("mountain_car.xml", params, MountainCarParams)
     _pose_wall(root)
+    _shape_linkage(root, params.car_mass)
     root.find("option").set("gravity", f"0 0 {-params.gravity!r}")
-    root.find(".//geom[@name='wheel']").set("mass", repr(params.car_mass))
     root.find(".//joint[@name='x']").set("damping", repr(params.damping))
     root.find(".//motor[@name='throttle']").set("gear", repr(params.force))
     return ET.tostring(root, encoding="unicode"), assets
 
 
-def _pose_wall(root: ET.Element) -> None:
-    """Turns the wall's face square to the track at x = -1.2, r from the wheel centre.
+def _wheel_radius(root: ET.Element) -> float:
+    return float(root.find(".//geom[@name='wheel']").get("size").split()[0])
 
-    So the wall stops the motion along the track (as the classic task zeroes
-    the velocity) without launching the car off the slope. Written into the
-    XML because MuJoCo fixes the pose of world-body geoms when it compiles.
+
+def _pose_wall(root: ET.Element) -> None:
+    """Turns the (drawn) wall's face square to the track at x = -1.2, r from the wheel centre.
+
+    Written into the XML because MuJoCo fixes the pose of world-body geoms when
+    it compiles. The wall's physics is the lower limit of joint x.
     """
-    radius = float(root.find(".//geom[@name='wheel']").get("size").split()[0])
+    radius = _wheel_radius(root)
     wall = root.find(".//geom[@name='wall']")
     half_thickness = float(wall.get("size").split()[0])
     # A rotation about y by -atan(h') takes the wall's local x to the tangent t.
@@ -154,6 +156,49 @@ def _pose_wall(root: ET.Element) -> None:
     pos = centre - (radius + half_thickness) * tangent
     wall.set("pos", " ".join(repr(float(v)) for v in pos))
     wall.set("quat", f"{float(np.cos(angle / 2))!r} 0 {float(np.sin(angle / 2))!r} 0")
+    root.find(".//joint[@name='x']").set("range", f"{X_MIN!r} 10")
+
+
+# Share of the car's mass carried by the slider, which the linkage moves only
+# vertically; the crank and the rocker each get a moment of inertia of
+# BALLAST * m / 18 and the linkage spins both at 3 x_dot, so the extra
+# horizontal inertia 9 * 2 * BALLAST * m / 18 equals the slider's extra vertical
+# mass and the whole acts as one point mass m on the curve. Real inertia on
+# every hinge keeps the hard equalities hard: MuJoCo scales a constraint's
+# softness by the inverse inertia it acts on, so near-massless links let it give.
+BALLAST = 0.9
+X_INDEX = 3  # qpos / qvel index of the slide x: crank, rocker, level, x down the chain
+
+
+def _shape_linkage(root: ET.Element, car_mass: float) -> None:
+    """Writes the hill and the masses into the linkage (see assets/mjcf/mountain_car.xml):
+    crank pivot at 0.55 + r, links A/2, crank at 3x, and the mass split by BALLAST.
+    """
+    root.find(".//body[@name='crank']").set("pos", f"0 0 {_HILL_OFFSET + _wheel_radius(root)!r}")
+    for body in ("rocker", "slider"):
+        root.find(f".//body[@name='{body}']").set("pos", f"{_HILL_AMPLITUDE / 2!r} 0 0")
+    polycoef = {
+        "crank_follows_x": (0.0, _HILL_FREQUENCY),  # theta = 3x
+        "rocker_mirrors_crank": (np.pi, -2.0),  # rocker's world angle theta + psi = pi - theta
+        "slider_stays_level": (-np.pi, 1.0),  # slider's world angle (pi - theta) + chi = 0
+    }
+    for name, (c0, c1) in polycoef.items():
+        root.find(f".//equality/joint[@name='{name}']").set("polycoef", f"{c0!r} {c1!r} 0 0 0")
+    ballast = BALLAST * car_mass
+    spin = ballast / (2 * _HILL_FREQUENCY**2)  # crank and rocker each
+    for body in ("crank", "rocker"):
+        root.find(f".//body[@name='{body}']/inertial").set("diaginertia", f"{spin!r} {spin!r} {spin!r}")
+    root.find(".//body[@name='crank']/inertial").set("mass", repr(ballast))  # on its fixed pivot
+    root.find(".//body[@name='slider']/inertial").set("mass", repr(ballast))
+    root.find(".//geom[@name='wheel']").set("mass", repr(car_mass - ballast))
+
+
+def linkage_angles(x: np.ndarray, x_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Hinge angles (crank, rocker, level) and their rates that put the car at x, (N, 3) each."""
+    k = _HILL_FREQUENCY
+    angles = np.stack([k * x, np.pi - 2 * k * x, k * x - np.pi], axis=1)
+    rates = np.stack([k * x_dot, -2 * k * x_dot, k * x_dot], axis=1)
+    return angles, rates
 
 
 class Physics(common.StatePhysics):
@@ -162,32 +207,58 @@ class Physics(common.StatePhysics):
     STATE_SIZE = 2
 
     def wheel_radius(self) -> float:
-        """Radius of the colliding wheel sphere (m)."""
+        """Radius of the wheel sphere (m)."""
         return float(self.named.model.geom_size["wheel", 0])
 
     def position(self) -> float:
-        """Horizontal position of the wheel centre, x (m)."""
+        """Horizontal position of the carriage, x (m): the wheel centre's while the linkage holds."""
         return float(self.named.data.qpos["x"][0])
 
     def velocity(self) -> float:
         """Horizontal velocity x_dot (m/s)."""
         return float(self.named.data.qvel["x"][0])
 
+    def car_mass(self) -> float:
+        """The mass m the car acts with on the curve (kg): the car body's plus the slider's."""
+        return float(self.named.model.body_mass["car"] + self.named.model.body_mass["slider"])
+
+    def _evaluated(self) -> Any:
+        """A scratch MjData at the current state with positions and inertia computed.
+
+        Not self.data: forward() there would change what the next step starts from.
+        """
+        scratch = getattr(self, "_scratch", None)
+        if scratch is None:
+            scratch = self._scratch = mujoco.MjData(self.model.ptr)
+        scratch.qpos[:] = self.data.qpos
+        scratch.qvel[:] = self.data.qvel
+        mujoco.mj_kinematics(self.model.ptr, scratch)
+        mujoco.mj_comPos(self.model.ptr, scratch)
+        mujoco.mj_crb(self.model.ptr, scratch)
+        return scratch
+
     def height(self) -> float:
-        """Height of the wheel centre above the hill's zero (m); h(x) + r on the surface."""
-        return float(self.named.data.qpos["z"][0])
+        """Height of the wheel centre above the hill's zero (m); h(x) + r on the track.
+
+        Forward kinematics of the linkage from the joint state, so a linkage that
+        gives shows up here.
+        """
+        return float(self._evaluated().xpos[self.model.name2id("car", "body")][2])
 
     def mechanical_energy(self) -> float:
-        """Kinetic plus gravitational energy of the car (J), zero height at z = 0."""
-        mass = float(self.named.model.body_mass["car"])
-        speed2 = float(np.sum(self.data.qvel**2))
-        return 0.5 * mass * speed2 + mass * -float(self.model.opt.gravity[2]) * self.height()
+        """Kinetic plus gravitational energy of the whole mechanism (J), zero height at z = 0."""
+        scratch = self._evaluated()
+        mass_matrix = np.zeros((self.model.nv, self.model.nv))
+        mujoco.mj_fullM(self.model.ptr, scratch, mass_matrix)
+        kinetic = 0.5 * float(scratch.qvel @ mass_matrix @ scratch.qvel)
+        potential = -float(np.sum(self.model.body_mass * (scratch.xipos @ self.model.opt.gravity)))
+        return kinetic + potential
 
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
-        return np.stack([qpos[:, 0], qvel[:, 0] * VELOCITY_SCALE], axis=1)
+        return np.stack([qpos[:, X_INDEX], qvel[:, X_INDEX] * VELOCITY_SCALE], axis=1)
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # On the surface, moving along it: z = h(x) + r and z_dot = h'(x) x_dot.
+        # On the track, moving along it: the hinges at the angles the equalities ask.
         x = states[:, 0]
         outside = (x < SETTABLE_X[0]) | (x > SETTABLE_X[1])
         if np.any(outside):
@@ -196,66 +267,37 @@ class Physics(common.StatePhysics):
                 f"(the track), got {x[outside][0]!r}"
             )
         x_dot = states[:, 1] / VELOCITY_SCALE
-        qpos = np.stack([x, hill_height(x) + self.wheel_radius()], axis=1)
-        qvel = np.stack([x_dot, hill_slope(x) * x_dot], axis=1)
-        return qpos, qvel
+        angles, rates = linkage_angles(x, x_dot)
+        return np.column_stack([angles, x]), np.column_stack([rates, x_dot])
 
 
-GUIDE_CLEARANCE = 0.0005  # m, free play between the wheel and the upper guide
+def _build_hill(physics: Physics) -> None:
+    """Fills in the drawn hill: heights one wheel radius below the wheel centre's
+    path ``c(s) = (s, h(s) + r)`` along its upward unit normal n(s), so the wheel
+    is drawn touching it.
 
-
-def _offset_profile(physics: Physics, geom: str, distance: float) -> np.ndarray:
-    """Heights (m) under the columns of hfield ``geom`` of the curve offset from the
-    wheel-centre line ``c(s) = (s, h(s) + r)`` by ``distance`` along its upward
-    unit normal n(s).
-
-    A wheel of radius r whose centre rides on c touches c - r n from above; the
-    offset stays a graph over x because |distance| is well under the hill's
-    smallest radius of curvature (0.25 m). Sampled densely in s and
-    interpolated onto the columns.
-    """
-    half_length = float(physics.named.model.hfield_size[geom, 0])
-    ncol = int(physics.named.model.hfield_ncol[geom])
-    centre_x = float(physics.named.model.geom_pos[geom, 0])
-    margin = 2 * abs(distance)
-    s = np.linspace(centre_x - half_length - margin, centre_x + half_length + margin, 20 * ncol)
-    slope = hill_slope(s)
-    norm = np.sqrt(1.0 + slope**2)
-    offset_x = s - distance * slope / norm
-    offset_z = hill_height(s) + physics.wheel_radius() + distance / norm
-    columns = np.linspace(centre_x - half_length, centre_x + half_length, ncol)
-    return np.interp(columns, offset_x, offset_z)
-
-
-def _set_elevation(physics: Physics, hfield: str, elevation: np.ndarray) -> None:
-    nrow = int(physics.named.model.hfield_nrow[hfield])
-    start = int(physics.named.model.hfield_adr[hfield])
-    physics.model.hfield_data[start:start + nrow * elevation.size] = np.tile(elevation, nrow)
-
-
-def _build_track(physics: Physics) -> None:
-    """Fills in the hill and the guide from :func:`hill_height`.
-
-    - hill (upright hfield): surface ``c - r n``, so the resting wheel centre is
-      exactly on ``h(x) + r``;
-    - guide (upside-down hfield, geom z at its top): lower face ``c + (r + 0.5 mm) n``,
-      which keeps the wheel on the track where the car would otherwise leave
-      it, i.e. fly off the convex crest near the goal (above about 1.6 m/s).
+    The offset stays a graph over x because r is well under the hill's smallest
+    radius of curvature (0.25 m); sampled densely in s and interpolated onto
+    the heightfield's columns.
     """
     radius = physics.wheel_radius()
-    hill_scale = float(physics.named.model.hfield_size["hill", 2])
-    _set_elevation(physics, "hill", _offset_profile(physics, "hill", -radius) / hill_scale)
-
-    guide_top = float(physics.named.model.geom_pos["guide", 2])
-    guide_scale = float(physics.named.model.hfield_size["guide", 2])
-    guide = _offset_profile(physics, "guide", radius + GUIDE_CLEARANCE)
-    _set_elevation(physics, "guide", (guide_top - guide) / guide_scale)
+    half_length = float(physics.named.model.hfield_size["hill", 0])
+    scale = float(physics.named.model.hfield_size["hill", 2])
+    nrow, ncol = int(physics.named.model.hfield_nrow["hill"]), int(physics.named.model.hfield_ncol["hill"])
+    centre_x = float(physics.named.model.geom_pos["hill", 0])
+    s = np.linspace(centre_x - half_length - 2 * radius, centre_x + half_length + 2 * radius, 20 * ncol)
+    slope = hill_slope(s)
+    norm = np.sqrt(1.0 + slope**2)
+    columns = np.linspace(centre_x - half_length, centre_x + half_length, ncol)
+    surface = np.interp(columns, s + radius * slope / norm, hill_height(s) + radius - radius / norm)
+    start = int(physics.named.model.hfield_adr["hill"])
+    physics.model.hfield_data[start:start + nrow * ncol] = np.tile(surface / scale, nrow)
 
 
 def make_physics(params: MountainCarParams | None = None) -> Physics:
-    """Compiles the model with ``params`` and fills in the hill."""
+    """Compiles the model with ``params`` and fills in the drawn hill."""
     physics = Physics.from_xml_string(*model_xml(params))
-    _build_track(physics)
+    _build_hill(physics)
     return physics
 
 
