@@ -265,8 +265,9 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
             clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
         median = np.median(returns, axis=0)
         ax_curve.plot(samples, median, color=color, lw=2.2, marker="o", ms=3.5)
+        seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
         handles.append(Line2D([], [], color=color, lw=2.2, marker="o", ms=3.5,
-                              label=f"{method_label(r.method)}: median of {len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"))
+                              label=f"{method_label(r.method)}: median of {seeds}"))
     handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.8, label="thin lines: one seed each"))
     if comparison.random_return is not None:
         ax_curve.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
