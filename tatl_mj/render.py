@@ -17,11 +17,14 @@ How a clip is made
   - MuJoCo tasks are drawn with ``mujoco.Renderer`` from the model's camera
     (``"tracking"`` by default, which follows the system); a task without a
     MuJoCo model draws itself (its ``painter``, numpy and Pillow).
-  - Overlay (top left, small): episode time, method label and running return.
+  - Overlay (top left, small): episode time, method label, running return and
+    episode number.
     Each panel is labelled with its domain at the bottom left.
-  - Episode end: with ``on_end="freeze"`` (default) the last frame is held for the
-    rest of the clip with the reason (terminal state, time limit or diverged); with
-    ``on_end="reset"`` a new episode starts and the overlay counts episodes.
+  - Episode end: the last frame, labelled with the reason (terminal state, time
+    limit or diverged), is held for at most ``END_HOLD_SECONDS`` (0.5 s); then with
+    ``on_end="reset"`` (default) a new episode starts, its overlay giving its number
+    and why the previous one ended, and with ``on_end="stop"`` the clip ends there
+    (shorter than asked). No frame is ever held longer, so a clip never freezes.
   - Side by side (``source=(source_env, source_state_fn)``): for every frame the
     source system is put in the mapped state ``source_state_fn(target_state)`` and
     drawn to the right of the target; the clip is then ``2 * width`` wide.
@@ -50,7 +53,8 @@ from PIL import Image, ImageDraw, ImageFont
 Policy = Callable[[np.ndarray], np.ndarray]
 SourceSpec = tuple[Any, Callable[[np.ndarray], np.ndarray]]
 
-END_MODES: tuple[str, ...] = ("freeze", "reset")
+END_MODES: tuple[str, ...] = ("reset", "stop")
+END_HOLD_SECONDS = 0.5  # how long the end of an episode stays on screen
 CLIP_EXTENSIONS: tuple[str, ...] = (".mp4", ".gif")
 UNTIMED_STEP_SECONDS = 0.25  # steps without a duration (no physics): show four per second
 
@@ -66,9 +70,12 @@ def render_episode(
     method_label: str = "",
     camera: str = "tracking",
     source: SourceSpec | None = None,
-    on_end: str = "freeze",
+    on_end: str = "reset",
 ) -> np.ndarray:
-    """Films ``policy`` acting in ``env``; returns frames ``(round(seconds * fps), H, W, 3)`` uint8.
+    """Films ``policy`` acting in ``env``; returns frames ``(n, H, W, 3)`` uint8.
+
+    ``n`` is ``round(seconds * fps)``, or fewer with ``on_end="stop"`` when the
+    episode ends first.
 
     Args:
       env: a tatl-mj (or dm_control) environment, or one that draws itself (``painter``).
@@ -85,10 +92,12 @@ def render_episode(
         the mapped state ``source_state_fn(target_state)`` (a ``(d,)`` state to a
         ``(d_s,)`` state), to the right of the target; the frames are then
         ``2 * width`` wide.
-      on_end: ``"freeze"`` holds the last frame when the episode ends,
-        ``"reset"`` starts a new one.
+      on_end: after an episode ends (and its last frame has been held for at
+        most ``END_HOLD_SECONDS``), ``"reset"`` starts a new one, ``"stop"`` ends
+        the clip.
     """
     frames = None
+    count = 0
     for k, frame in enumerate(iter_frames(
         env, policy, seconds=seconds, width=width, height=height, fps=fps,
         method_label=method_label, camera=camera, source=source, on_end=on_end,
@@ -96,7 +105,8 @@ def render_episode(
         if frames is None:
             frames = np.empty((_frame_count(seconds, fps),) + frame.shape, np.uint8)
         frames[k] = frame
-    return frames
+        count = k + 1
+    return frames[:count]
 
 
 def iter_frames(
@@ -110,11 +120,12 @@ def iter_frames(
     method_label: str = "",
     camera: str = "tracking",
     source: SourceSpec | None = None,
-    on_end: str = "freeze",
+    on_end: str = "reset",
 ) -> Iterator[np.ndarray]:
     """Like :func:`render_episode`, but yields the frames one by one (constant memory).
 
-    A yielded array may be yielded again (a frozen end), so copy it to keep it.
+    A yielded array may be yielded again (the held end of an episode), so copy it
+    to keep it.
     """
     n_frames = _frame_count(seconds, fps)
     _check_size("width", width)
@@ -136,39 +147,39 @@ def iter_frames(
         target_name = _domain_name(env)
         source_name = None if source is None else _domain_name(source[0])
 
+        # An episode end stays on screen for hold_frames frames (at least one).
+        hold_frames = max(1, math.floor(END_HOLD_SECONDS * fps + 1e-9))
         timestep = env.reset()
-        elapsed, episode_steps, episode, episode_return = 0.0, 0, 1, 0.0
-        ended = ""
-        frozen_frame = None
+        episode, episode_steps, episode_return = 1, 0, 0.0
+        episode_start = 0.0  # clip time at which this episode's first state is shown
+        ended, previous_end, held, end_frame = "", "", 0, None
         for k in range(n_frames):
-            if frozen_frame is not None:
-                yield frozen_frame
-                continue
+            clip_time = k / fps
+            if ended:
+                if held < hold_frames:
+                    held += 1
+                    yield end_frame
+                    continue
+                if on_end == "stop":
+                    return
+                timestep = env.reset()
+                episode, episode_steps, episode_return = episode + 1, 0, 0.0
+                episode_start, previous_end, ended = clip_time, ended, ""
             # Step until the next step would pass this frame's time.
-            while not ended and elapsed + step_seconds <= k / fps + 1e-9:
+            while not ended and episode_start + (episode_steps + 1) * step_seconds <= clip_time + 1e-9:
                 timestep = env.step(_action(policy, _state(timestep)))
-                elapsed += step_seconds
                 episode_steps += 1
                 episode_return += float(timestep.reward or 0.0)
                 if timestep.last():
                     ended = _end_reason(env, timestep)
-                    if on_end == "reset":
-                        timestep = env.reset()
-                        episode += 1
-                        episode_steps, episode_return, ended = 0, 0.0, ""
 
             state = _state(timestep)
-            if hasattr(env, "physics"):
-                text = f"t {episode_steps * step_seconds:5.2f} s"
-            else:
-                text = f"step {episode_steps:3d}"
-            if method_label:
-                text += f"   {method_label}"
-            text += f"   return {episode_return:.1f}"
-            if on_end == "reset":
-                text += f"   episode {episode}"
-            if ended:
-                text += f"   [{ended}]"
+            text = _overlay_text(
+                clock=f"t {episode_steps * step_seconds:5.2f} s" if hasattr(env, "physics")
+                else f"step {episode_steps:3d}",
+                method_label=method_label, episode_return=episode_return, episode=episode,
+                previous_end=previous_end, ended=ended,
+            )
             image = _label(paint(), text, "top")
             image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
             if show_source is not None:
@@ -177,8 +188,22 @@ def iter_frames(
                 right[:, :2] = 40  # a thin divider between the panels
                 image = np.concatenate([image, right], axis=1)
             if ended:
-                frozen_frame = image
+                end_frame, held = image, 1
             yield image
+
+
+def _overlay_text(*, clock: str, method_label: str, episode_return: float, episode: int,
+                  previous_end: str, ended: str) -> str:
+    """The top overlay: clock, method, return, episode number (and why the last one ended)."""
+    text = clock
+    if method_label:
+        text += f"   {method_label}"
+    text += f"   return {episode_return:.1f}   episode {episode}"
+    if previous_end and not ended:
+        text += f" (episode {episode - 1}: {previous_end})"
+    if ended:
+        text += f"   [{ended}]"
+    return text
 
 
 def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps: float) -> Path:

@@ -1,18 +1,38 @@
-"""The results table's samples-to-threshold ratios, on a hand-made summary."""
+"""The results table and figures, on hand-made summaries with known answers."""
+
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
 
 from tatl_mj.experiments import plot
 
+BUDGETS = [100, 1000, 10000]
 
-def summary(samples_to_threshold: dict) -> dict:
-    methods = {
-        name: {"final_return": [1.0, 2.0, 3.0], "samples_to_threshold": values, "curve": {"samples": [100, 1000]}}
-        for name, values in samples_to_threshold.items()
-    }
-    experiment = {
-        "spec": {"title": "Toy"}, "threshold_meaningful": True, "methods": methods,
-        "threshold": 1.5, "random_return": 0.0, "mapping_target_samples": [10],
-    }
-    return {"preset": "p", "seeds": [0, 1, 2], "threshold_fraction": 0.95, "experiments": {"toy": experiment}}
+
+def curve_for(samples_to_threshold: float | None) -> list[float]:
+    """A return curve (threshold 9.5 with random 0 and best final 10) reaching it at the given budget."""
+    if samples_to_threshold is None:
+        return [0.0, 0.0, 5.0]
+    return [10.0 if b >= samples_to_threshold else 0.0 for b in BUDGETS]
+
+
+def experiment(reach: dict, seeds: dict | None = None) -> dict:
+    methods = {}
+    for name, values in reach.items():
+        own = (seeds or {}).get(name, list(range(len(values))))
+        curves = [curve_for(v) for v in values]
+        methods[name] = {"seeds": own, "final_return": [c[-1] for c in curves],
+                         "curve": {"samples": BUDGETS, "mean_return": curves}}
+    all_seeds = sorted({s for m in methods.values() for s in m["seeds"]})
+    return {"spec": {"title": "Toy"}, "methods": methods, "source_seeds": all_seeds,
+            "random_returns": [0.0] * len(all_seeds), "mapping_target_samples": [10]}
+
+
+def summary(reach: dict, seeds: dict | None = None, methods: list | None = None) -> dict:
+    return {"preset": "p", "seeds": [0, 1, 2], "threshold_fraction": 0.95, "methods": methods or list(reach),
+            "experiments": {"toy": experiment(reach, seeds)}}
 
 
 def row(table: str, label: str) -> list[str]:
@@ -22,14 +42,75 @@ def row(table: str, label: str) -> list[str]:
 
 def test_ratio_is_the_median_over_ta_tl_median():
     table = plot.table(summary({"ta-tl": [100, 100, None], "uma-tl": [1000, 1000, 100], "rl": [None, None, 1000]}))
-    assert row(table, "TA-TL")[2:] == ["100 (2/3 seeds reached)", "-"]
-    assert row(table, "UMA-TL")[2:] == ["1,000 (3/3 seeds reached)", "10.0x"]
+    assert row(table, "TA-TL")[2:] == ["100 (100, 100, never; 2/3 reached)", "-"]
+    assert row(table, "UMA-TL")[2:] == ["1,000 (1,000, 1,000, 100; 3/3 reached)", "10.0x"]
     # RL's median seed never reached it: the ratio is at least the largest budget over TA-TL's.
-    assert row(table, "RL (no transfer)")[2:] == ["not reached (1/3 seeds reached)", "> 10x (median seed never reached it)"]
-    assert "mean ± sd" in table and "| 2 ± 0.82 |" in table
+    assert row(table, "RL (no transfer)")[2:] == ["never (never, never, 1,000; 1/3 reached)",
+                                                  "> 100x (median seed never reached it)"]
+    assert row(table, "TA-TL")[1] == "8.333 ± 2.4 (10)"
+    assert "Seed sets differ" not in table
 
 
 def test_ratio_when_ta_tl_never_reaches_the_threshold():
     table = plot.table(summary({"ta-tl": [None, None, 100], "uma-tl": [100, 100, 100], "rl": [None, None, None]}))
     assert row(table, "UMA-TL")[3] == "TA-TL (median seed) never reached it"
     assert row(table, "RL (no transfer)")[3] == "neither (median seed) reached it"
+
+
+def test_table_compares_only_shared_seeds_and_says_so():
+    # TA-TL finished seed 0 only; UMA-TL finished 0 and 1 and reached it only on seed 1.
+    table = plot.table(summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []},
+                               seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []}))
+    assert row(table, "UMA-TL")[2] == "never (never; 0/1 reached)"
+    assert row(table, "TA-TL")[2] == "100 (100; 1/1 reached)"
+    assert ("Seed sets differ: compared over seeds [0], the ones every method finished; UMA-TL also "
+            "finished [1] (not compared); RL (no transfer) finished no seed (not shown).") in table
+
+
+def test_table_without_meaningful_threshold_judges_final_returns():
+    exp = experiment({"ta-tl": [None], "uma-tl": [None]})
+    exp["random_returns"] = [50.0]  # every method ends at 5, below random
+    table = plot.table({"preset": "p", "seeds": [0], "methods": ["ta-tl", "uma-tl"], "experiments": {"toy": exp}})
+    assert "No meaningful threshold" in table and "Judged on final returns" in table
+    assert row(table, "TA-TL")[2:] == ["no meaningful threshold", "n/a"]
+
+
+def test_axis_limits_clip_outliers_but_keep_references():
+    values = [-100.0, -90.0, -80.0, -95.0, -500000.0]
+    low, high = plot.axis_limits(values, keep=[-120.0])
+    assert -130 < low < -120 and -80 < high < -75  # the -500,000 seed is left out, random kept
+    assert plot.axis_limits([1.0, 2.0, 3.0]) == pytest.approx((0.88, 3.12))  # nothing to clip
+
+
+def test_colours_are_stable_and_distinct():
+    names = ["ta-tl", "uma-tl", "rl", "ta-tl-h", "ta-tl-replan", "apprentice-upright", "oracle", "oracle-h"]
+    colours = plot.method_colors(names)
+    assert len(set(colours.values())) == len(names)
+    assert colours["ta-tl"] == plot.COLORS["ta-tl"]
+    assert plot.method_colors(["oracle"])["oracle"] == plot.method_colors(["oracle", "ta-tl"])["oracle"]
+
+
+def test_compact_labels_and_spaced_ticks():
+    assert [plot.compact(v) for v in (250, 1500, -230000, 1.2e6, 0.5)] == ["250", "1.5k", "-230k", "1.2M", "0.5"]
+    assert plot.spaced_ticks([100, 120, 1000, 10000], min_gap=0.5) == [120, 1000, 10000]  # largest kept first
+
+
+@pytest.mark.parametrize("case", ["eight-methods", "seed-sets-differ", "no-threshold"])
+def test_figure_is_drawn_for_any_number_of_methods(tmp_path, case):
+    if case == "eight-methods":
+        names = ["ta-tl", "uma-tl", "rl", "ta-tl-h", "ta-tl-replan", "apprentice-upright", "oracle", "oracle-h"]
+        exp = experiment({m: [100, None, 1000] for m in names})
+        exp["methods"]["rl"]["curve"]["mean_return"][0][1] = -5e5  # an outlier to clip
+    elif case == "seed-sets-differ":
+        exp = experiment({"ta-tl": [100], "uma-tl": [None, 100]}, seeds={"ta-tl": [0], "uma-tl": [0, 1]})
+    else:
+        exp = experiment({"ta-tl": [None], "uma-tl": [None]})
+        exp["random_returns"] = [50.0]
+    path = plot.figure("toy", exp, tmp_path / "toy.png")
+    image = np.asarray(Image.open(path).convert("RGB"))
+    assert image.shape[1] == 1320 and image.shape[0] > 500
+    # Every method's colour appears in the figure.
+    for colour in plot.method_colors(sorted(exp["methods"], key=plot._order)).values():
+        rgb = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
+        assert (np.abs(image.astype(int) - rgb).sum(axis=2) < 10).sum() > 20, colour
+    assert math.isfinite(image.mean())

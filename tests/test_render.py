@@ -7,6 +7,7 @@ that conftest.py selects.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -181,22 +182,46 @@ def test_frames_follow_the_simulation_clock():
     assert env.physics.data.time == pytest.approx(0.9)
 
 
-def test_episode_end_freezes_last_frame():
+def _longest_hold(frames: np.ndarray) -> int:
+    """The most consecutive identical frames."""
+    longest = run = 1
+    for a, b in zip(frames[:-1], frames[1:]):
+        run = run + 1 if np.array_equal(a, b) else 1
+        longest = max(longest, run)
+    return longest
+
+
+def test_episode_end_is_held_at_most_half_a_second_then_a_new_episode_starts():
     env = _cartpole()
     frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
                                    width=64, height=48)
-    # Full force right topples the pole in well under a second; the rest is the held end.
-    assert env.physics.data.time < 1.0
-    changes = [np.any(a != b) for a, b in zip(frames[:-1], frames[1:])]
-    assert any(changes[:3]) and not any(changes[10:])
+    assert frames.shape[0] == 30
+    # Full force right topples the pole in well under a second, so several
+    # episodes fit in 3 s; the end of each is on screen for 0.5 s (5 frames), no more.
+    assert _longest_hold(frames) == 5
+    assert env.physics.data.time < 1.0  # a later episode, restarted from time 0
+    # Frames of the first episode, its held end, and the second episode moving again.
+    first_end = next(i for i in range(26) if all(np.array_equal(frames[i], frames[i + j]) for j in range(5)))
+    assert not np.array_equal(frames[first_end + 5], frames[first_end + 6])
 
 
-def test_reset_mode_keeps_filming_new_episodes():
+def test_stop_mode_ends_the_clip_after_the_held_end():
     env = _cartpole()
     frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
-                                   width=64, height=48, on_end="reset")
-    assert env.physics.data.time < 1.0  # a later episode, restarted from time 0
-    assert any(np.any(a != b) for a, b in zip(frames[20:-1], frames[21:]))
+                                   width=64, height=48, on_end="stop")
+    ended_at = env.physics.data.time  # the episode's last step
+    # Frames up to the first one at or after the end, then 4 more of the held end.
+    assert frames.shape[0] == math.ceil(ended_at * 10 - 1e-9) + 1 + 4
+    assert _longest_hold(frames) == 5 and np.array_equal(frames[-1], frames[-5])
+
+
+def test_overlay_names_the_episode_and_why_the_last_one_ended():
+    text = render._overlay_text(clock="t  0.40 s", method_label="ta-tl", episode_return=3.25, episode=2,
+                                previous_end="terminal state", ended="")
+    assert text == "t  0.40 s   ta-tl   return 3.2   episode 2 (episode 1: terminal state)"
+    text = render._overlay_text(clock="step  16", method_label="", episode_return=-16.0, episode=1,
+                                previous_end="", ended="terminal state")
+    assert text == "step  16   return -16.0   episode 1   [terminal state]"
 
 
 def test_overlay_is_drawn_where_promised():
@@ -238,8 +263,8 @@ def test_bad_arguments_raise_value_errors():
     env = _cartpole()
     with pytest.raises(ValueError, match=r"camera 'nope'.*valid choices: \['fixed', 'tracking'\]"):
         render.render_episode(env, _lqr_like, seconds=0.1, camera="nope")
-    with pytest.raises(ValueError, match="on_end must be one of"):
-        render.render_episode(env, _lqr_like, seconds=0.1, on_end="loop")
+    with pytest.raises(ValueError, match=r"on_end must be one of \('reset', 'stop'\)"):
+        render.render_episode(env, _lqr_like, seconds=0.1, on_end="freeze")
     with pytest.raises(ValueError, match="seconds must be a positive number"):
         render.render_episode(env, _lqr_like, seconds=0)
     with pytest.raises(ValueError, match="width must be an integer"):
@@ -291,9 +316,11 @@ def test_grid_world_is_filmed_beside_its_source():
     frames = render.render_episode(env, policy, seconds=5.0, fps=4, width=320, height=240,
                                    source=(plain, lambda state: state))
     assert frames.shape == (20, 240, 640, 3)
-    first, last = frames[0], frames[-1]
-    np.testing.assert_array_equal(frames[-3], last)  # goal after 16 steps (4 s): frozen
-    assert not np.array_equal(frames[15], frames[16])
+    # Goal after 16 steps (frame 16, 4 s), held 0.5 s (2 frames), then episode 2 from the start.
+    first, last = frames[0], frames[16]
+    np.testing.assert_array_equal(frames[17], last)
+    assert not np.array_equal(frames[15], frames[16]) and not np.array_equal(frames[17], frames[18])
+    np.testing.assert_allclose(_agent_centre(frames[18][:, :320]), _agent_centre(first[:, :320]))
     start, goal = _agent_centre(first[:, :320]), _agent_centre(last[:, :320])
     assert abs(goal[1] - start[1]) < 1 and goal[0] > start[0] + 100  # same row, 8 cells right
     # The source panel shows the same cell, without the wind band's blue.

@@ -1,35 +1,70 @@
-"""`tatl plot DIR`: the paper's two panels per experiment and a comparison table.
+"""`tatl plot DIR`: two panels per experiment and a comparison table (DIR/results.md).
 
-Panel (a): average target return against target samples, mean over seeds
-with a 95% Student-t interval, one line per method, the random policy and the
-convergence threshold dashed. Panel (b): training length, the target samples
-each method needed to reach the threshold (one dot per seed; seeds that never
-reached it are drawn at the top, marked "not reached").
+Everything is drawn from :func:`tatl_mj.experiments.summary.compare`, so the
+figure and the table show the same seeds and the same numbers:
+
+- Panel (a): average target return against target samples; a thin line per
+  seed and a thick median line per method; the random policy's return (a
+  reference, dotted) and the threshold (dashed). Values far outside the bulk of
+  the data are clipped to the axis and marked with triangles, so one diverged
+  seed cannot flatten every other curve.
+- Panel (b): target samples each seed needed to reach the threshold (a dot per
+  seed, a bar for the median); seeds that never reached it sit on the "never"
+  row. Without a meaningful threshold, panel (b) shows final returns instead.
+- A caption under the panels defines the threshold and the lines.
+
+Any number of methods is drawn, each with a colour that depends only on its
+name (known methods have fixed ones).
 """
 
 from __future__ import annotations
 
 import math
+import textwrap
+import zlib
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from tatl_mj.experiments.records import read_json
+from tatl_mj.experiments.summary import THRESHOLD_FRACTION, Comparison, MethodResult, compare
 
 COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
 LABELS = {"ta-tl": "TA-TL", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
+# Colours for other methods, picked by a hash of the name (stable across runs);
+# none is close to the fixed ones or to the grey/black reference lines.
+PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173",
+           "#e7ba52", "#008080")
+REFERENCE_METHOD = "ta-tl"  # the table's "vs" column divides by this method's median
+CLIP_SCALES = 6.0           # values beyond this many robust spreads from the bulk are clipped
 
 
-def mean_interval(values: np.ndarray, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
-    """Mean over axis 0 and the half-width of its Student-t confidence interval (0 for one seed)."""
-    values = np.asarray(values, dtype=np.float64)
-    mean = values.mean(axis=0)
-    n = values.shape[0]
-    if n < 2:
-        return mean, np.zeros_like(mean)
-    sem = values.std(axis=0, ddof=1) / math.sqrt(n)
-    return mean, sem * stats.t.ppf(0.5 + confidence / 2, n - 1)
+def method_label(method: str) -> str:
+    return LABELS.get(method, method)
+
+
+def method_colors(methods: Sequence[str]) -> dict[str, str]:
+    """A colour per method: fixed for known names, else by a hash of the name.
+
+    Two methods of one figure never share a colour (a clash moves the later one
+    to the next free palette entry).
+    """
+    taken: set[str] = set()
+    colors = {}
+    for m in methods:
+        if m in COLORS:
+            colors[m] = COLORS[m]
+            taken.add(COLORS[m])
+    for m in methods:
+        if m in colors:
+            continue
+        start = zlib.crc32(m.encode()) % len(PALETTE)
+        free = [PALETTE[(start + i) % len(PALETTE)] for i in range(len(PALETTE))]
+        colors[m] = next((c for c in free if c not in taken), free[0])
+        taken.add(colors[m])
+    return colors
 
 
 def _order(method: str) -> tuple[int, str]:
@@ -37,119 +72,322 @@ def _order(method: str) -> tuple[int, str]:
     return (known.index(method) if method in known else len(known), method)
 
 
-def _figure(name: str, experiment: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax_curve, ax_len) = plt.subplots(1, 2, figsize=(10, 3.8))
-    methods = {m: experiment["methods"][m] for m in sorted(experiment["methods"], key=_order)}
-    max_budget = 1
-    levels = []
-    for m, data in methods.items():
-        samples = np.asarray(data["curve"]["samples"])
-        max_budget = max(max_budget, samples.max())
-        mean, half = mean_interval(np.asarray(data["curve"]["mean_return"]))
-        levels.extend(mean)
-        color = COLORS.get(m)
-        ax_curve.plot(samples, mean, marker="o", ms=3, color=color, label=LABELS.get(m, m))
-        ax_curve.fill_between(samples, mean - half, mean + half, color=color, alpha=0.2, lw=0)
-    if experiment.get("random_return") is not None:
-        ax_curve.axhline(experiment["random_return"], color="grey", ls=":", lw=1, label="random policy")
-    if experiment.get("threshold") is not None:
-        ax_curve.axhline(experiment["threshold"], color="black", ls="--", lw=0.8, label="threshold")
-    # With few seeds the t-interval can be far wider than the spread of the
-    # means; keep the means in view (the band is clipped, not hidden).
-    levels += [v for v in (experiment.get("random_return"), experiment.get("threshold")) if v is not None]
-    low, high = min(levels), max(levels)
-    pad = 0.15 * (high - low) if high > low else 1.0
-    ax_curve.set_ylim(low - pad, high + pad)
-    ax_curve.set_xscale("log")
-    ax_curve.set_xlabel("target samples")
-    ax_curve.set_ylabel("average return")
-    ax_curve.set_title("(a) average reward")
-    ax_curve.legend(fontsize=7)
-
-    names = list(methods)
-    for i, m in enumerate(names):
-        reached = [s for s in methods[m]["samples_to_threshold"] if s is not None]
-        missed = sum(s is None for s in methods[m]["samples_to_threshold"])
-        if reached:
-            ax_len.bar(i, np.median(reached), color=COLORS.get(m), alpha=0.6)
-            ax_len.scatter([i] * len(reached), reached, color="black", s=10, zorder=3)
-        if missed:
-            ax_len.scatter([i] * missed, [max_budget * 1.5] * missed, marker="x", color="black", zorder=3)
-            ax_len.annotate(f"{missed} not reached", (i, max_budget * 1.5), fontsize=7, ha="center",
-                            xytext=(0, 6), textcoords="offset points")
-    ax_len.set_xticks(range(len(names)), [LABELS.get(m, m) for m in names], fontsize=8)
-    ax_len.set_yscale("log")
-    ax_len.set_ylabel("target samples to threshold")
-    ax_len.set_title("(b) training length")
-    fig.suptitle(experiment["spec"].get("title", name), fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def _fmt_samples(value: float) -> str:
+    return "never" if math.isinf(value) else f"{int(value):,}"
 
 
-def median_samples(values: list) -> float:
-    """Median samples-to-threshold over seeds, a seed that never reached it counting as infinite."""
-    return float(np.median([math.inf if v is None else v for v in values]))
+def compact(value: float) -> str:
+    """A short tick label: 250, 1.5k, 20k, -230k, 1.2M."""
+    magnitude = abs(value)
+    for scale, suffix in ((1e6, "M"), (1e3, "k")):
+        if magnitude >= scale:
+            return f"{value / scale:.3g}{suffix}"
+    return f"{value:.3g}"
 
 
-def _fmt(values: list) -> str:
-    reached = sum(v is not None for v in values)
-    median = median_samples(values)
-    text = "not reached" if math.isinf(median) else f"{int(median):,}"
-    return f"{text} ({reached}/{len(values)} seeds reached)"
+def spaced_ticks(values: Sequence[float], min_gap: float) -> list[float]:
+    """``values`` (positive, for a log axis) thinned so neighbours are >= ``min_gap`` decades apart.
+
+    The largest value is always kept (the final budget matters most).
+    """
+    kept: list[float] = []
+    for v in sorted(set(values), reverse=True):
+        if not kept or math.log10(kept[-1]) - math.log10(v) >= min_gap:
+            kept.append(v)
+    return sorted(kept)
+
+
+# --- Table ------------------------------------------------------------------------
+
+def seed_note(comparison: Comparison) -> str:
+    """A sentence saying which seeds are compared and which are left out (empty if none)."""
+    if not comparison.seed_sets_differ:
+        return ""
+    parts = [f"compared over seeds {list(comparison.seeds)}, the ones every method finished"]
+    for r in comparison.methods:
+        if r.extra_seeds:
+            parts.append(f"{method_label(r.method)} also finished {list(r.extra_seeds)} (not compared)")
+    for m in comparison.missing:
+        parts.append(f"{method_label(m)} finished no seed (not shown)")
+    return "Seed sets differ: " + "; ".join(parts) + "."
+
+
+def _ratio(result: MethodResult, reference: MethodResult | None) -> str:
+    if reference is None:
+        return "n/a"
+    if result.method == reference.method:
+        return "-"
+    mine, theirs = result.median_samples, reference.median_samples
+    if math.isinf(theirs) and math.isinf(mine):
+        return "neither (median seed) reached it"
+    if math.isinf(theirs):
+        return f"{method_label(reference.method)} (median seed) never reached it"
+    if math.isinf(mine):
+        return f"> {result.largest_budget / theirs:.0f}x (median seed never reached it)"
+    return f"{mine / theirs:.1f}x"
 
 
 def table(summary: dict) -> str:
     """Markdown: per experiment and method, final return, samples to threshold, ratio to TA-TL."""
     lines = [
-        f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Threshold = random return + "
-        f"{summary['threshold_fraction']:.0%} of (best method's final return - random return). "
-        "Samples to threshold: median over seeds, a seed that never reached it counting as "
-        "infinite. Ratio: that median over TA-TL's (> 1: TA-TL needed fewer target samples).",
+        f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Methods are compared only over the "
+        "seeds they all finished. Threshold = random return + "
+        f"{summary.get('threshold_fraction', THRESHOLD_FRACTION):.0%} of (best method's mean final return "
+        "- random return). Samples to threshold: the smallest budget from which a seed's return stays at "
+        "or above the threshold for every larger budget ('never' if none); the median counts 'never' as "
+        f"infinite. vs {method_label(REFERENCE_METHOD)}: that median over {method_label(REFERENCE_METHOD)}'s "
+        f"(> 1: {method_label(REFERENCE_METHOD)} needed fewer target samples).",
         "",
     ]
     for name, exp in summary["experiments"].items():
+        order = sorted(exp["methods"], key=_order)
+        asked = [m for m in summary.get("methods", order) if m not in order]
+        comparison = compare(exp, order + asked)
         lines += [f"### {exp['spec'].get('title', name)} (`{name}`)", ""]
         claim = exp["spec"].get("paper_claim")
         if claim:
             lines += [f"Paper: {claim}", ""]
-        meaningful = exp["threshold_meaningful"]
-        if not meaningful:
-            lines += ["**No method beat the random policy here, so samples to threshold are not "
-                      "reported.**", ""]
-        lines += ["| method | final return (mean ± sd) | target samples to threshold | vs TA-TL |",
-                  "|---|---|---|---|"]
-        ta = exp["methods"].get("ta-tl")
-        ta_median = median_samples(ta["samples_to_threshold"]) if ta else math.inf
-        for m in sorted(exp["methods"], key=_order):
-            data = exp["methods"][m]
-            finals = np.asarray(data["final_return"])
-            median = median_samples(data["samples_to_threshold"])
-            if not meaningful:
-                samples, ratio = "n/a", "n/a"
+        note = seed_note(comparison)
+        if note:
+            lines += [f"**{note}**", ""]
+        if not comparison.methods:
+            lines += ["No method finished any seed.", ""]
+            continue
+        if not comparison.seeds:
+            lines += ["**No seed was finished by every method: nothing to compare.**", ""]
+            continue
+        if not comparison.meaningful:
+            lines += [_no_threshold_sentence(comparison), ""]
+        lines += [
+            f"| method | final return: mean ± sd (median) | target samples to threshold: median (per seed) "
+            f"| vs {method_label(REFERENCE_METHOD)} |",
+            "|---|---|---|---|",
+        ]
+        reference = comparison.result(REFERENCE_METHOD)
+        for r in comparison.methods:
+            finals = np.asarray(r.final_returns)
+            final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
+            if comparison.meaningful:
+                per_seed = ", ".join(_fmt_samples(v) for v in r.samples_to_threshold)
+                samples = f"{_fmt_samples(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached)"
+                ratio = _ratio(r, reference)
             else:
-                samples = _fmt(data["samples_to_threshold"])
-                if m == "ta-tl":
-                    ratio = "-"
-                elif math.isinf(ta_median) and math.isinf(median):
-                    ratio = "neither (median seed) reached it"
-                elif math.isinf(ta_median):
-                    ratio = "TA-TL (median seed) never reached it"
-                elif math.isinf(median):
-                    ratio = f"> {max(data['curve']['samples']) / ta_median:.0f}x (median seed never reached it)"
-                else:
-                    ratio = f"{median / ta_median:.1f}x"
-            lines.append(f"| {LABELS.get(m, m)} | {finals.mean():.4g} ± {finals.std():.2g} | {samples} | {ratio} |")
-        threshold = "n/a" if exp["threshold"] is None else f"{exp['threshold']:.4g}"
-        lines += ["", f"Random policy: {exp['random_return']:.4g}; threshold: {threshold}; target "
+                samples, ratio = "no meaningful threshold", "n/a"
+            lines.append(f"| {method_label(r.method)} | {final} | {samples} | {ratio} |")
+        threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
+        mapping = sorted(set(exp.get("mapping_target_samples", [])))
+        lines += ["", f"Random policy: {comparison.random_return:.4g}; threshold: {threshold}; target "
                   f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
-                  f"{sorted(set(exp['mapping_target_samples']))}.", ""]
+                  f"{mapping}.", ""]
     return "\n".join(lines)
+
+
+def _no_threshold_sentence(comparison: Comparison) -> str:
+    best = method_label(comparison.best_method) if comparison.best_method else "none"
+    return (f"**No meaningful threshold: no method's mean final return beats the random policy's "
+            f"({comparison.random_return:.4g}), so the threshold would lie at or below it. Judged on final "
+            f"returns: best {best}.**")
+
+
+# --- Figures ----------------------------------------------------------------------
+
+def axis_limits(values: Sequence[float], keep: Sequence[float] = (),
+                scales: float = CLIP_SCALES) -> tuple[float, float]:
+    """y-limits holding the bulk of ``values`` and every one of ``keep`` (reference lines).
+
+    A value more than ``scales`` robust spreads (1.4826 x median absolute
+    deviation, at least the span of ``keep``) beyond the bulk is left outside, to
+    be drawn clipped; with none left out the limits hold every value.
+    """
+    values = np.asarray([v for v in values if np.isfinite(v)], dtype=np.float64)
+    keep = np.asarray([v for v in keep if v is not None and np.isfinite(v)], dtype=np.float64)
+    if values.size == 0 and keep.size == 0:
+        return -1.0, 1.0
+    pool = np.concatenate([values, keep])
+    center = float(np.median(pool))
+    spread = 1.4826 * float(np.median(np.abs(pool - center)))
+    if keep.size:
+        spread = max(spread, float(keep.max() - keep.min()))
+    spread = max(spread, 1e-6 * max(1.0, abs(center)))
+    low_fence = min([center] + list(keep)) - scales * spread
+    high_fence = max([center] + list(keep)) + scales * spread
+    inside = pool[(pool >= low_fence) & (pool <= high_fence)]
+    low, high = float(inside.min()), float(inside.max())
+    pad = 0.06 * (high - low) if high > low else max(1.0, abs(high) * 0.1)
+    return low - pad, high + pad
+
+
+def _mark_clipped(ax: Any, x: np.ndarray, y: np.ndarray, limits: tuple[float, float], color: str) -> int:
+    """Triangles on the axis edge for values beyond it; returns how many."""
+    low, high = limits
+    below, above = y < low, y > high
+    ax.scatter(x[below], np.full(below.sum(), low), marker="v", s=28, color=color, edgecolor="black",
+               linewidth=0.5, zorder=5, clip_on=False)
+    ax.scatter(x[above], np.full(above.sum(), high), marker="^", s=28, color=color, edgecolor="black",
+               linewidth=0.5, zorder=5, clip_on=False)
+    return int(below.sum() + above.sum())
+
+
+def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str] | None = None) -> Path:
+    """Draws one experiment's two panels and caption to ``path``; returns it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter
+
+    order = sorted(experiment["methods"], key=_order) if methods is None else list(methods)
+    comparison = compare(experiment, order)
+    results = comparison.methods
+    colors = method_colors([r.method for r in results])
+    fig, (ax_curve, ax_len) = plt.subplots(1, 2, figsize=(11, 4.0))
+    handles: list[Any] = []
+
+    # Panel (a): thin per-seed lines, a thick median, references.
+    curves = {}
+    for r in results:
+        data = experiment["methods"][r.method]
+        rows = [data["seeds"].index(s) for s in r.seeds]
+        curves[r.method] = (np.asarray(data["curve"]["samples"], dtype=np.float64),
+                            np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows])
+    references = [v for v in (comparison.random_return, comparison.threshold if comparison.meaningful else None)
+                  if v is not None]
+    limits = axis_limits([v for _, y in curves.values() for v in y.ravel()], references)
+    clipped = 0
+    clipped_values: list[float] = []
+    for r in results:
+        samples, returns = curves[r.method]
+        color = colors[r.method]
+        for seed_returns in returns:
+            ax_curve.plot(samples, seed_returns, color=color, lw=0.7, alpha=0.45)
+            clipped += _mark_clipped(ax_curve, samples, seed_returns, limits, color)
+            clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
+        median = np.median(returns, axis=0)
+        ax_curve.plot(samples, median, color=color, lw=2.2, marker="o", ms=3.5)
+        seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
+        handles.append(Line2D([], [], color=color, lw=2.2, marker="o", ms=3.5,
+                              label=f"{method_label(r.method)}: median of {seeds}"))
+    handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.8, label="thin lines: one seed each"))
+    if comparison.random_return is not None:
+        ax_curve.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
+        handles.append(Line2D([], [], color="0.45", ls=":", lw=1.2,
+                              label=f"reference: random policy ({comparison.random_return:.4g})"))
+    if comparison.meaningful:
+        ax_curve.axhline(comparison.threshold, color="black", ls="--", lw=0.9)
+        handles.append(Line2D([], [], color="black", ls="--", lw=0.9,
+                              label=f"threshold ({comparison.threshold:.4g})"))
+    if clipped:
+        handles.append(Line2D([], [], color="white", marker="v", markeredgecolor="black", markerfacecolor="0.6",
+                              ms=6, lw=0, label=f"beyond the axis, clipped ({clipped} point{'s' * (clipped > 1)})"))
+    ax_curve.set_ylim(*limits)
+    ax_curve.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
+    ax_curve.set_xscale("log")
+    budgets = sorted({b for samples, _ in curves.values() for b in samples})
+    span = math.log10(max(budgets) / min(budgets)) if budgets else 0.0
+    x_ticks = spaced_ticks(budgets, max(0.12, span / 9))
+    ax_curve.set_xticks(x_ticks, [compact(b) for b in x_ticks])
+    ax_curve.minorticks_off()
+    ax_curve.set_xlabel("target samples")
+    ax_curve.set_ylabel("average return")
+    ax_curve.set_title("(a) average return", fontsize=10)
+    ax_curve.grid(alpha=0.25)
+
+    # Panel (b): per-seed samples to threshold (or final returns without a threshold).
+    positions = np.arange(len(results))
+    spread = np.linspace(-0.18, 0.18, max(1, len(comparison.seeds))) if len(comparison.seeds) > 1 else [0.0]
+    if comparison.meaningful:
+        largest = max(r.largest_budget for r in results)
+        never = largest * 3.0  # a row above every budget on the log axis
+        for i, r in enumerate(results):
+            values = np.asarray([never if math.isinf(v) else v for v in r.samples_to_threshold])
+            median = never if math.isinf(r.median_samples) else r.median_samples
+            ax_len.hlines(median, i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
+            ax_len.scatter(i + np.asarray(spread), values, color="black", s=12, zorder=3)
+        ax_len.set_yscale("log")
+        ax_len.axhspan(largest * 1.7, never * 1.8, color="0.92", zorder=0)
+        smallest = min(min(experiment["methods"][r.method]["curve"]["samples"]) for r in results)
+        ax_len.set_ylim(smallest / 1.6, never * 1.8)
+        budget_ticks = sorted({b for r in results for b in experiment["methods"][r.method]["curve"]["samples"]})
+        budget_ticks = spaced_ticks(budget_ticks, max(0.1, math.log10(never / smallest) / 12))
+        ax_len.set_yticks(budget_ticks + [never], [compact(b) for b in budget_ticks] + ["never"])
+        ax_len.minorticks_off()
+        ax_len.set_ylabel("target samples to threshold")
+        ax_len.set_title("(b) training length", fontsize=10)
+        ticks = [f"{_wrap(method_label(r.method))}\n{r.reached}/{len(r.seeds)} reached" for r in results]
+        if len(results) > 5:  # slanted below: one line each
+            ticks = [f"{method_label(r.method)} ({r.reached}/{len(r.seeds)})" for r in results]
+        handles += [Line2D([], [], color="black", marker="o", ms=3.5, lw=0, label="(b) one seed"),
+                    Line2D([], [], color="0.3", lw=3, label="(b) median, 'never' counted as infinite")]
+    else:
+        finals = [v for r in results for v in r.final_returns]
+        final_limits = axis_limits(finals, references)
+        for i, r in enumerate(results):
+            values = np.asarray(r.final_returns)
+            ax_len.hlines(np.median(values), i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
+            ax_len.scatter(i + np.asarray(spread), np.clip(values, *final_limits), color="black", s=12,
+                           zorder=3)
+            _mark_clipped(ax_len, i + np.asarray(spread), values, final_limits, colors[r.method])
+        if comparison.random_return is not None:
+            ax_len.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
+        ax_len.set_ylim(*final_limits)
+        ax_len.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
+        ax_len.set_ylabel("final return")
+        ax_len.set_title("(b) final return (no meaningful threshold)", fontsize=10)
+        ticks = [_wrap(method_label(r.method)) if len(results) <= 5 else method_label(r.method) for r in results]
+    # Up to five methods fit side by side (labels wrapped); more are slanted.
+    many = len(results) > 5
+    ax_len.set_xticks(positions, ticks, fontsize=8, rotation=30 if many else 0, ha="right" if many else "center",
+                      rotation_mode="anchor" if many else "default")
+    ax_len.set_xlim(-0.6, len(results) - 0.4)
+    ax_len.grid(axis="y", alpha=0.25)
+
+    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
+    ncol = min(3, len(handles))
+    legend = fig.legend(handles=handles, loc="upper center", ncol=ncol, fontsize=8, frameon=False)
+    caption = _caption(comparison, clipped_values)
+    caption_lines = caption.count("\n") + 1
+    legend_rows = math.ceil(len(handles) / ncol)
+    # Room under the panels for tick labels, the legend and the caption, in inches.
+    tick_lines = max(t.count("\n") + 1 for t in ticks)
+    tick_room = 0.3 + 0.16 * tick_lines
+    if many:  # slanted at 30 degrees: half the label's width (about 0.075 in a character) goes down
+        tick_room = 0.4 + 0.5 * 0.075 * max(len(t) for t in ticks)
+    block = tick_room + 0.2 * legend_rows + 0.16 * caption_lines + 0.15
+    fig.set_size_inches(11, 3.6 + block)
+    height = 3.6 + block
+    fig.subplots_adjust(left=0.07, right=0.98, top=1 - 0.55 / height, bottom=block / height, wspace=0.25)
+    legend.set_bbox_to_anchor((0.5, (block - tick_room) / height), transform=fig.transFigure)
+    fig.text(0.07, 0.1 / height, caption, fontsize=7.5, va="bottom", ha="left")
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _wrap(label: str) -> str:
+    return "\n".join(textwrap.wrap(label, width=14)) or label
+
+
+def _caption(comparison: Comparison, clipped_values: list[float]) -> str:
+    seeds = f"seeds {list(comparison.seeds)}"
+    parts = [f"Compared over {seeds}."]
+    if comparison.meaningful:
+        parts.append(
+            f"Threshold (dashed) = random-policy return + {THRESHOLD_FRACTION:.0%} x (best method's mean final "
+            f"return - random-policy return) = {comparison.threshold:.4g}. (b) A seed's samples to threshold: "
+            "the smallest budget from which its return stays at or above the threshold for every larger "
+            "budget; seeds that never stay there are on the 'never' row.")
+    else:
+        parts.append(
+            "No meaningful threshold: no method's mean final return beats the random policy, so the "
+            "experiment is judged on final returns; (b) shows each seed's final return.")
+    if clipped_values:
+        parts.append(f"Triangles: values beyond the axis (most extreme {max(clipped_values, key=abs):.3g}).")
+    note = seed_note(comparison)
+    if note:
+        parts.append(note)
+    return "\n".join(textwrap.wrap(" ".join(parts), width=170))
 
 
 def plot(run_dir: str | Path) -> list[Path]:
@@ -163,11 +401,9 @@ def plot(run_dir: str | Path) -> list[Path]:
     figures.mkdir(exist_ok=True)
     written = []
     for name, experiment in summary["experiments"].items():
-        if not experiment["methods"]:
+        if not compare(experiment).seeds:
             continue
-        path = figures / f"{name}.png"
-        _figure(name, experiment, path)
-        written.append(path)
+        written.append(figure(name, experiment, figures / f"{name}.png"))
     results = run_dir / "results.md"
     results.write_text(table(summary) + "\n")
     written.append(results)

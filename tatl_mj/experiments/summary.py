@@ -1,16 +1,31 @@
-"""Aggregates finished records into DIR/summary.json.
+"""Aggregates finished records into DIR/summary.json, and compares methods fairly.
 
-The convergence threshold is defined once per experiment and applied to every
-method alike: ``threshold = R_random + 0.95 (R_best - R_random)``, where
-``R_best`` is the best method's final average return (mean over seeds, at the
-largest budget) and ``R_random`` the uniformly random policy's average return
-under the same evaluation protocol. A method's ``samples_to_threshold`` for a
-seed is the smallest budget whose average return reaches the threshold, or
-``null`` if it never does.
+Definitions (one place; the table, the figures and summary.json all use them):
+
+- Seeds compared: only the seeds every method with any finished record shares
+  (and whose source unit finished). A method that finished extra seeds has them
+  listed, not averaged in; when the seed sets differ the table says so.
+- Threshold: ``R_random + 0.95 (R_best - R_random)`` over the compared seeds,
+  where ``R_best`` is the best method's final return (mean over seeds, at the
+  largest budget) and ``R_random`` the uniformly random policy's return under the
+  same evaluation protocol.
+- No meaningful threshold: a threshold at or below ``R_random`` (no method beat
+  the random policy on average) says nothing about learning speed; samples to
+  threshold are then not reported and the experiment is judged on final returns.
+- Samples to threshold of one seed: the smallest budget from which its return
+  stays at or above the threshold at every larger budget (a method that crosses
+  and falls back has not reached it); ``math.inf`` if it never does (``null`` in
+  summary.json, which has no infinity).
+
+:func:`compare` applies them to one experiment of a summary; the results table
+and panel (b) of the figures are both drawn from its answer.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,11 +35,142 @@ from tatl_mj.experiments.records import RunDirectory, read_json
 THRESHOLD_FRACTION = 0.95
 
 
-def samples_to_threshold(curve: list[dict], threshold: float) -> int | None:
-    for point in curve:
-        if point["mean_return"] >= threshold:
-            return point["samples"]
-    return None
+def samples_to_threshold(samples: Sequence[float], returns: Sequence[float], threshold: float) -> float:
+    """The smallest budget from which ``returns`` stay >= ``threshold`` for every larger budget.
+
+    ``samples`` are the budgets in increasing order and ``returns`` the return at
+    each; ``math.inf`` if the last return is below the threshold.
+    """
+    if len(samples) != len(returns):
+        raise ValueError(f"samples and returns differ in length: {len(samples)} != {len(returns)}")
+    if any(b <= a for a, b in zip(samples[:-1], samples[1:])):
+        raise ValueError(f"samples must be strictly increasing budgets, got {list(samples)}")
+    reached = math.inf
+    for budget, value in zip(reversed(samples), reversed(returns)):
+        if not value >= threshold:  # NaN counts as below
+            break
+        reached = budget
+    return reached
+
+
+def threshold_for(final_means: dict[str, float], random_return: float,
+                  fraction: float = THRESHOLD_FRACTION) -> tuple[float, str, bool]:
+    """``(threshold, best_method, meaningful)`` from each method's mean final return.
+
+    ``meaningful`` is False when the threshold is at or below ``random_return``.
+    """
+    if not final_means:
+        raise ValueError("final_means is empty: no method to take the best of")
+    best = max(final_means, key=lambda m: final_means[m])
+    threshold = random_return + fraction * (final_means[best] - random_return)
+    return threshold, best, bool(threshold > random_return)
+
+
+@dataclass(frozen=True)
+class MethodResult:
+    """One method over the compared seeds (``seeds``, in that order)."""
+
+    method: str
+    seeds: tuple[int, ...]
+    final_returns: tuple[float, ...]
+    samples_to_threshold: tuple[float, ...]  # math.inf: never; empty when no meaningful threshold
+    extra_seeds: tuple[int, ...]             # finished but not shared by every method: not compared
+    largest_budget: int
+
+    @property
+    def final_mean(self) -> float:
+        return float(np.mean(self.final_returns))
+
+    @property
+    def reached(self) -> int:
+        return sum(math.isfinite(v) for v in self.samples_to_threshold)
+
+    @property
+    def median_samples(self) -> float:
+        """Median over seeds, a seed that never reached the threshold counting as infinite."""
+        return float(np.median(self.samples_to_threshold)) if self.samples_to_threshold else math.nan
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Every method of one experiment on the seeds they share; see the module docstring."""
+
+    seeds: tuple[int, ...]
+    methods: tuple[MethodResult, ...]
+    missing: tuple[str, ...]                 # methods asked for with no finished seed
+    random_return: float | None
+    threshold: float | None
+    best_method: str | None
+    meaningful: bool
+
+    @property
+    def seed_sets_differ(self) -> bool:
+        return bool(self.missing) or any(r.extra_seeds for r in self.methods)
+
+    def result(self, method: str) -> MethodResult | None:
+        return next((r for r in self.methods if r.method == method), None)
+
+
+def compare(experiment: dict, methods: Sequence[str] | None = None,
+            fraction: float = THRESHOLD_FRACTION) -> Comparison:
+    """Compares the methods of one summary experiment over their shared seeds.
+
+    ``experiment`` is ``summary["experiments"][name]``: it needs ``methods``
+    (per method ``seeds``, ``final_return``, ``curve.samples`` and
+    ``curve.mean_return``) and the random policy's return per seed
+    (``random_returns``, aligned with ``source_seeds``; older summaries give one
+    ``random_return``). ``methods`` are the names asked for, in display order
+    (default: those with records, in the summary's order).
+    """
+    data = experiment["methods"]
+    asked = list(data) if methods is None else list(methods)
+    present = [m for m in asked if data.get(m, {}).get("seeds")]
+    missing = tuple(m for m in asked if m not in present)
+    random_by_seed = _random_by_seed(experiment)
+    shared = sorted(set.intersection(*(set(data[m]["seeds"]) for m in present))) if present else []
+    if random_by_seed is not None:
+        shared = [s for s in shared if s in random_by_seed]
+
+    results = []
+    for m in present:
+        index = {seed: i for i, seed in enumerate(data[m]["seeds"])}
+        rows = [index[s] for s in shared]
+        results.append((m, rows, index))
+    random_return = None
+    if random_by_seed:
+        # Without shared seeds there is no threshold; the value is still worth showing.
+        random_return = float(np.mean([random_by_seed[s] for s in (shared or random_by_seed)]))
+    threshold, best, meaningful = None, None, False
+    if shared and random_return is not None:
+        finals = {m: float(np.mean([data[m]["final_return"][i] for i in rows])) for m, rows, _ in results}
+        threshold, best, meaningful = threshold_for(finals, random_return, fraction)
+
+    out = []
+    for m, rows, index in results:
+        curve = data[m]["curve"]
+        budgets = list(curve["samples"])
+        reached: tuple[float, ...] = ()
+        if meaningful:
+            reached = tuple(samples_to_threshold(budgets, curve["mean_return"][i], threshold) for i in rows)
+        out.append(MethodResult(
+            method=m, seeds=tuple(shared),
+            final_returns=tuple(float(data[m]["final_return"][i]) for i in rows),
+            samples_to_threshold=reached,
+            extra_seeds=tuple(s for s in data[m]["seeds"] if s not in shared),
+            largest_budget=int(max(budgets)),
+        ))
+    return Comparison(seeds=tuple(shared), methods=tuple(out), missing=missing, random_return=random_return,
+                      threshold=threshold, best_method=best, meaningful=meaningful)
+
+
+def _random_by_seed(experiment: dict) -> dict[int, float] | None:
+    if "random_returns" in experiment:
+        return dict(zip(experiment["source_seeds"], experiment["random_returns"]))
+    if experiment.get("random_return") is None:
+        return None
+    # An older summary: one value for every seed.
+    seeds = {s for m in experiment["methods"].values() for s in m.get("seeds", [])}
+    return {s: float(experiment["random_return"]) for s in seeds}
 
 
 def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: list[str]) -> dict:
@@ -39,12 +185,6 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
             path = run_dir.record_path(name, seed, m)
             if path.exists():
                 records[m][seed] = read_json(path)
-    random_return = float(np.mean([s["random_return"] for s in sources.values()])) if sources else None
-    finals = {m: float(np.mean([r["final_return"] for r in recs.values()])) for m, recs in records.items() if recs}
-    best_method = max(finals, key=finals.get) if finals else None
-    threshold = None
-    if best_method is not None and random_return is not None:
-        threshold = random_return + THRESHOLD_FRACTION * (finals[best_method] - random_return)
     out_methods = {}
     for m, recs in records.items():
         seeds_done = sorted(recs)
@@ -54,9 +194,6 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
         out_methods[m] = {
             "seeds": seeds_done,
             "final_return": [recs[s]["final_return"] for s in seeds_done],
-            "samples_to_threshold": [
-                samples_to_threshold(c, threshold) if threshold is not None else None for c in curves
-            ],
             "curve": {
                 "samples": [p["samples"] for p in curves[0]],
                 "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
@@ -66,23 +203,43 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
                 k in recs[s] for s in seeds_done)},
             "wall_s": [recs[s].get("wall_s") for s in seeds_done],
         }
-    return {
+    source_seeds = sorted(sources)
+    experiment: dict[str, Any] = {
         "methods": out_methods,
-        "random_return": random_return,
-        "best_method": best_method,
-        "threshold": threshold,
-        # With no method above the random policy, "reaching the threshold" says nothing.
-        "threshold_meaningful": bool(best_method is not None and random_return is not None
-                                     and finals[best_method] > random_return),
-        "source_samples": [sources[s]["source_samples"] for s in sorted(sources)],
-        "mapping_target_samples": [sources[s]["mapping_target_samples"] for s in sorted(sources)],
-        "mapping_source_samples": [sources[s]["mapping_source_samples"] for s in sorted(sources)],
-        "source_timings": [sources[s]["timings"] for s in sorted(sources)],
+        "source_seeds": source_seeds,
+        "random_returns": [sources[s]["random_return"] for s in source_seeds],
+        "source_samples": [sources[s]["source_samples"] for s in source_seeds],
+        "mapping_target_samples": [sources[s]["mapping_target_samples"] for s in source_seeds],
+        "mapping_source_samples": [sources[s]["mapping_source_samples"] for s in source_seeds],
+        "source_timings": [sources[s]["timings"] for s in source_seeds],
     }
+    comparison = compare(experiment, methods)
+    for result in comparison.methods:
+        # Per finished seed (not only the shared ones), against the shared-seed threshold.
+        curve = out_methods[result.method]["curve"]
+        out_methods[result.method]["samples_to_threshold"] = [
+            _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold))
+            if comparison.meaningful else None
+            for returns in curve["mean_return"]
+        ]
+    experiment.update({
+        "compared_seeds": list(comparison.seeds),
+        "seed_sets_differ": comparison.seed_sets_differ,
+        "random_return": comparison.random_return,
+        "best_method": comparison.best_method,
+        "threshold": comparison.threshold,
+        "threshold_meaningful": comparison.meaningful,
+    })
+    return experiment
+
+
+def _json_samples(value: float) -> int | None:
+    return None if math.isinf(value) else int(value)
 
 
 def build(run_dir: RunDirectory, *, specs: list[dict], preset: str, seeds: list[int], methods: list[str],
           **extra: Any) -> dict:
+    """The summary of a run folder: one entry per spec (see :func:`compare` for the fields used)."""
     experiments = {}
     for spec in specs:
         experiments[spec["name"]] = {**_experiment(run_dir, spec["name"], seeds, methods), "spec": spec}
