@@ -41,6 +41,16 @@ The target model is any batched one-step function ``model(states (N, d), action_
 (actuator values in) for the oracle ablation. Differences on the ``periodic``
 coordinates (pass ``apprentice.periodic``) are taken the shorter way round.
 
+Wiring (the three methods of issue 12 are one class with different settings):
+
+- horizon TA-TL: ``HorizonTATLPolicy(apprentice.predict, low, high, horizon=round(T_h /
+  dt_T), step_ratio=dt_S / dt_T, weights=w, source_q=q, mapping=chi, source_step=P_S,
+  target_actions=values, periodic=apprentice.periodic, samples_used=n)``;
+- ``apprentice-upright``: the same with ``reference="zero"`` and no source fields;
+- oracle: ``model`` = the true target step taking actuator values. A simulator that draws
+  noise per call gives the nominal and probe rollouts different noise; seed it the same
+  for every call (or switch the noise off) so G_j measures the action alone.
+
 Pure numpy: nothing here imports mujoco or a suite domain.
 """
 
