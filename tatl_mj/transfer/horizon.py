@@ -1,0 +1,285 @@
+"""Horizon-matched TA-TL: Algorithm 1's adaptation over H target steps instead of one.
+
+Where this departs from the paper, and why. Algorithm 1 (``tatl.py``) picks the action
+that makes the apprentice land on the projected source *next* state. When the target's
+actuator reaches the coordinates that matter only through other states (the bicycle:
+handlebar torque moves the steer rate within one 10 ms step, the roll only over
+100-400 ms), that one-step match is a servo on the wrong coordinates. Here the same
+idea is applied over a horizon of H target steps with one action held throughout:
+
+1. ``x_0 = chi_plus(s_T)``; roll the greedy source policy ``x_k = P_S(x_{k-1},
+   argmax_a Q_S(x_{k-1}, a))`` for ``K = ceil(H / rho)`` source steps, where
+   ``rho = dt_source / dt_target`` is the step ratio (cart-pole 20 ms, bicycle 10 ms:
+   rho = 2, so source step k is target step 2k).
+2. References ``r_j`` for target steps j = 1..H: ``chi`` of the source trajectory at
+   source time ``t = j / rho``, linearly interpolated between ``chi(x_floor(t))`` and
+   ``chi(x_ceil(t))`` (on periodic coordinates along the shorter arc). With an integer
+   rho the shared times ``j = rho k`` get ``chi(x_k)`` exactly and the steps in
+   between the chord; a non-integer rho needs no special case.
+   With ``reference="zero"`` the references are all 0 (the ``apprentice-upright``
+   ablation: the same controller aiming at the target's zero state, no source at all).
+3. Nominal action ``a_0``: the target action of the first greedy source action's
+   index, ``target_actions[a_S]`` (Assumption 1, as Algorithm 1's a_T), or
+   ``clip(0, low, high)`` for the zero reference.
+4. Free response ``F_j``: the model rolled j steps from s_T with a_0 held; control
+   response ``G_j`` (d x m): the finite difference of that rollout when column i of
+   the held action moves by ``delta_i``. For j = 1 and a model affine in the action
+   (the apprentice) ``G_1 = B_hat`` exactly; for j > 1 it is exact when the drift is
+   linear too, and a secant of width delta otherwise.
+5. ``a = clip(a_0 + argmin_D sum_j |W^(1/2) (F_j + G_j D - r_j)|^2, low, high)`` with
+   W = diag(weights), solved as one stacked least-squares problem per state by SVD
+   (the minimum-norm D when the weighted responses do not determine it, e.g. weights
+   only on a coordinate the action cannot reach within H steps: then D = 0).
+
+With H = 1, rho = 1 and W = I this is Algorithm 1 term for term: ``F_1 = P_hat(s_T,
+a_T)``, ``G_1 = B_hat``, ``r_1 = s_hat_T_next`` and ``D = pinv(B_hat) (r_1 - F_1) = K
+pi_ad`` (the least-squares minimiser of ``|P_hat(s, a) - s_hat_T_next|`` is what pinv
+gives), so the two policies agree up to float rounding (tests check it).
+
+The target model is any batched one-step function ``model(states (N, d), action_values
+(N, m)) -> (N, d)``: ``apprentice.predict`` for horizon TA-TL, the true simulator
+(actuator values in) for the oracle ablation. Differences on the ``periodic``
+coordinates (pass ``apprentice.periodic``) are taken the shorter way round.
+
+Wiring (the three methods of issue 12 are one class with different settings):
+
+- horizon TA-TL: ``HorizonTATLPolicy(apprentice.predict, low, high, horizon=round(T_h /
+  dt_T), step_ratio=dt_S / dt_T, weights=w, source_q=q, mapping=chi, source_step=P_S,
+  target_actions=values, periodic=apprentice.periodic, samples_used=n)``;
+- ``apprentice-upright``: the same with ``reference="zero"`` and no source fields;
+- oracle: ``model`` = the true target step taking actuator values. A simulator that draws
+  noise per call gives the nominal and probe rollouts different noise; seed it the same
+  for every call (or switch the noise off) so G_j measures the action alone.
+
+Pure numpy: nothing here imports mujoco or a suite domain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import numpy as np
+
+from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.features import as_states, periodic_difference, periodic_mask
+from tatl_mj.transfer.fqi import QFunction
+from tatl_mj.transfer.tatl import SourceStep
+
+TargetModel = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""One batched target step: (N, dT) states, (N, mT) action values -> (N, dT) next states."""
+
+REFERENCES = ("source", "zero")
+
+_EPS = 1e-9  # tolerance on source times j / rho, so rho = 0.02 / 0.01 lands on integers
+
+
+@dataclasses.dataclass(frozen=True)
+class HorizonStep:
+    """Every quantity of one horizon TA-TL decision (batched over N target states).
+
+    The source fields are None for the zero reference.
+    """
+
+    s_T: np.ndarray  # (N, dT) target states
+    s_hat_S: np.ndarray | None  # (N, dS) chi_plus(s_T), the source rollout's start x_0
+    a_S: np.ndarray | None  # (N,) greedy source action index at x_0
+    source_states: np.ndarray | None  # (N, K + 1, dS) source rollout x_0..x_K
+    references: np.ndarray  # (N, H, dT) r_j, j = 1..H
+    nominal: np.ndarray  # (N, mT) a_0, the held action the responses are taken about
+    free: np.ndarray  # (N, H, dT) F_j, the model's rollout with a_0 held
+    control: np.ndarray  # (N, H, dT, mT) G_j, d F_j / d a (finite differences)
+    adaptive: np.ndarray  # (N, mT) D, the weighted least-squares correction
+    action: np.ndarray  # (N, mT) clip(a_0 + D, low, high)
+
+
+def _least_squares(rows: np.ndarray, rhs: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Minimum-norm x of |rows x - rhs| per state: (N, p, m), (N, p), (N,) -> (N, m).
+
+    ``pinv``'s cutoff is relative to the largest singular value, so a response that is
+    zero up to rounding (1e-16, an unactuated coordinate) would be inverted into a huge
+    action; the cutoff here is relative to the unweighted response size ``scale``.
+    """
+    u, sv, vt = np.linalg.svd(rows, full_matrices=False)
+    keep = sv > 1e-10 * scale[:, None]
+    inverse = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
+    coeffs = inverse * np.einsum("npk,np->nk", u, rhs)
+    return np.einsum("nkm,nk->nm", vt, coeffs)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class HorizonTATLPolicy:
+    """Horizon-matched TA-TL (see the module docstring for the algorithm).
+
+    Attributes:
+      model: the target model, (N, dT) states, (N, mT) action values -> (N, dT).
+      target_low, target_high: (mT,) actuator limits; the action is clipped to them.
+      horizon: H, target steps matched (e.g. 20 for 200 ms of 10 ms bicycle steps).
+      step_ratio: rho = dt_source / dt_target (> 0; 2 for cart-pole -> bicycle).
+      weights: (dT,) diagonal of W, >= 0 and not all 0; None means all ones.
+      reference: "source" (the projected source rollout) or "zero" (aim at the zero
+        state; the source fields are then not used and may be None).
+      source_q, mapping, source_step, target_actions: Q_S, chi / chi_plus, P_S and the
+        (n, mT) target action values of the source's n action indices; required for
+        ``reference="source"``.
+      periodic: (dT,) bools marking angle coordinates (``apprentice.periodic``).
+      delta: (mT,) finite-difference probe in actuator units (> 0); None means 10% of
+        the actuator range (1 where the range is unbounded). The probe goes towards the
+        inside of the range, so a clipping simulator sees the perturbation.
+      samples_used: target samples the model used, for reports (as TATLPolicy's).
+    """
+
+    model: TargetModel
+    target_low: np.ndarray
+    target_high: np.ndarray
+    horizon: int = 1
+    step_ratio: float = 1.0
+    weights: np.ndarray | None = None
+    reference: str = "source"
+    source_q: QFunction | None = None
+    mapping: Mapping | None = None
+    source_step: SourceStep | None = None
+    target_actions: np.ndarray | None = None
+    periodic: tuple[bool, ...] | None = None
+    delta: np.ndarray | None = None
+    samples_used: int | None = None
+
+    def __post_init__(self) -> None:
+        if not callable(self.model):
+            raise ValueError("model must be callable (states (N, d), action values (N, m)) -> (N, d)")
+        low = np.atleast_1d(np.asarray(self.target_low, dtype=np.float64)).ravel()
+        high = np.atleast_1d(np.asarray(self.target_high, dtype=np.float64)).ravel()
+        if low.size == 0 or low.shape != high.shape or np.any(np.isnan(low)) or np.any(np.isnan(high)) or np.any(low > high):
+            raise ValueError(
+                f"target_low must be <= target_high, one entry per action column each, "
+                f"got {self.target_low!r} and {self.target_high!r}"
+            )
+        m = low.size
+        object.__setattr__(self, "target_low", low)
+        object.__setattr__(self, "target_high", high)
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
+            raise ValueError(f"horizon must be a positive integer (target steps), got {self.horizon!r}")
+        ratio = self.step_ratio
+        if isinstance(ratio, bool) or not isinstance(ratio, (int, float, np.number)) or not (math.isfinite(ratio) and ratio > 0):
+            raise ValueError(f"step_ratio must be a finite number > 0 (dt_source / dt_target), got {ratio!r}")
+        object.__setattr__(self, "step_ratio", float(ratio))
+        if self.weights is not None:
+            w = np.asarray(self.weights, dtype=np.float64)
+            if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+                raise ValueError(f"weights must be a (d,) vector of finite numbers >= 0, not all 0, got {self.weights!r}")
+            object.__setattr__(self, "weights", w)
+        if self.reference not in REFERENCES:
+            raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
+        if self.reference == "source":
+            missing = [n for n in ("source_q", "mapping", "source_step", "target_actions") if getattr(self, n) is None]
+            if missing:
+                raise ValueError(f"reference='source' needs {', '.join(missing)} (or use reference='zero')")
+            if not callable(self.source_step):
+                raise ValueError("source_step must be callable (states (N, dS), action indices (N,)) -> (N, dS)")
+            actions = np.asarray(self.target_actions, dtype=np.float64)
+            actions = actions[:, None] if actions.ndim == 1 else actions
+            if actions.ndim != 2 or actions.shape[1] != m or not np.all(np.isfinite(actions)):
+                raise ValueError(f"target_actions must be a finite (n, {m}) array, got shape {np.shape(self.target_actions)}")
+            if self.source_q.n_actions != len(actions):
+                raise ValueError(
+                    f"source_q has {self.source_q.n_actions} actions, target_actions has {len(actions)} (Assumption 1)"
+                )
+            object.__setattr__(self, "target_actions", actions)
+        object.__setattr__(self, "periodic", periodic_mask(self.periodic, None, "periodic"))
+        if self.delta is None:
+            span = high - low
+            delta = np.where(np.isfinite(span) & (span > 0), 0.1 * span, 1.0)
+        else:
+            delta = np.asarray(self.delta, dtype=np.float64)
+            if delta.size not in (1, m) or not np.all(np.isfinite(delta)) or np.any(delta <= 0):
+                raise ValueError(f"delta must be finite numbers > 0, one or {m} of them, got {self.delta!r}")
+            delta = np.broadcast_to(delta.ravel(), (m,)).copy()
+        object.__setattr__(self, "delta", delta)
+
+    @property
+    def source_steps(self) -> int:
+        """K = ceil(H / rho), the source steps rolled per decision."""
+        return max(1, math.ceil(self.horizon / self.step_ratio - _EPS))
+
+    def _source_references(self, s_T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """x_0, a_S, the source rollout (N, K + 1, dS) and the references (N, H, dT)."""
+        x = self.mapping.chi_plus(s_T)
+        s_hat_S = x
+        rollout = [x]
+        a_S = None
+        for _ in range(self.source_steps):
+            a = np.asarray(self.source_q.greedy(x), dtype=np.int64)
+            a_S = a if a_S is None else a_S
+            x = np.asarray(self.source_step(x, a), dtype=np.float64)
+            if x.shape != s_hat_S.shape:
+                raise ValueError(f"source_step returned shape {x.shape}, expected {s_hat_S.shape}")
+            rollout.append(x)
+        source_states = np.stack(rollout, axis=1)  # (N, K + 1, dS)
+        n, k1, d_s = source_states.shape
+        mapped = self.mapping.chi(source_states.reshape(n * k1, d_s)).reshape(n, k1, -1)
+        if mapped.shape[2] != s_T.shape[1]:
+            raise ValueError(f"mapping.chi gives {mapped.shape[2]} target coordinates, states have {s_T.shape[1]}")
+        # Source time of target step j is j / rho; interpolate between its neighbours.
+        t = np.arange(1, self.horizon + 1) / self.step_ratio
+        k0 = np.minimum(np.floor(t + _EPS).astype(np.int64), k1 - 1)
+        k_1 = np.minimum(k0 + 1, k1 - 1)
+        frac = np.clip(t - k0, 0.0, 1.0)
+        frac[np.abs(frac) < _EPS] = 0.0  # shared times take chi(x_k) itself
+        lo, hi = mapped[:, k0], mapped[:, k_1]
+        references = lo + frac[None, :, None] * periodic_difference(hi, lo, self.periodic)
+        return s_hat_S, a_S, source_states, references
+
+    def _responses(self, s_T: np.ndarray, nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """F (N, H, d) with a_0 held, and G (N, H, d, m) by finite differences."""
+        n, d = s_T.shape
+        m = nominal.shape[1]
+        # Probe towards the inside of the actuator range so a clipping model responds.
+        step = np.where(nominal + self.delta <= self.target_high, self.delta, -self.delta)  # (N, m)
+        actions = np.repeat(nominal[None], m + 1, axis=0)  # block 0 nominal, block i+1 probes column i
+        for i in range(m):
+            actions[i + 1, :, i] += step[:, i]
+        actions = actions.reshape((m + 1) * n, m)
+        states = np.tile(s_T, (m + 1, 1))
+        path = np.empty((self.horizon, m + 1, n, d))
+        for j in range(self.horizon):
+            states = np.asarray(self.model(states, actions), dtype=np.float64)
+            if states.shape != ((m + 1) * n, d):
+                raise ValueError(f"model returned shape {states.shape}, expected {((m + 1) * n, d)}")
+            path[j] = states.reshape(m + 1, n, d)
+        free = path[:, 0].transpose(1, 0, 2)  # (N, H, d)
+        moved = periodic_difference(path[:, 1:], path[:, :1], self.periodic)  # (H, m, N, d)
+        control = moved.transpose(2, 0, 3, 1) / step[:, None, None, :]  # (N, H, d, m)
+        return free, control
+
+    def step(self, target_states: np.ndarray) -> HorizonStep:
+        """One decision for (N, dT) target states, with every intermediate."""
+        s_T = as_states(target_states, "target_states")
+        n, d = s_T.shape
+        m = self.target_low.size
+        weights = np.ones(d) if self.weights is None else self.weights
+        if weights.size != d:
+            raise ValueError(f"weights has {weights.size} entries, target states have {d} coordinates")
+        if self.periodic is not None and len(self.periodic) != d:
+            raise ValueError(f"periodic has {len(self.periodic)} entries, target states have {d} coordinates")
+        if self.reference == "source":
+            s_hat_S, a_S, source_states, references = self._source_references(s_T)
+            nominal = self.target_actions[a_S]
+        else:
+            s_hat_S = a_S = source_states = None
+            references = np.zeros((n, self.horizon, d))
+            nominal = np.broadcast_to(np.clip(0.0, self.target_low, self.target_high), (n, m)).copy()
+        free, control = self._responses(s_T, nominal)
+        root = np.sqrt(weights)
+        gap = root * periodic_difference(free, references, self.periodic)  # (N, H, d)
+        rows = (root[None, None, :, None] * control).reshape(n, self.horizon * d, m)
+        adaptive = -_least_squares(rows, gap.reshape(n, self.horizon * d), root.max() * np.abs(control).max(axis=(1, 2, 3)))
+        action = np.clip(nominal + adaptive, self.target_low, self.target_high)
+        return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
+
+    def __call__(self, target_states: np.ndarray) -> np.ndarray:
+        """(N, dT) target states -> (N, mT) target action values."""
+        return self.step(target_states).action
+
+
+__all__ = ["REFERENCES", "HorizonStep", "HorizonTATLPolicy", "TargetModel"]
