@@ -91,18 +91,26 @@ def test_apprentice_mode_ties_and_fallback():
                                  np.zeros((4, 2), bool))
     # (0, 0) -> 1, 1, 2: the mode 1, its reward the mean of the two landings on 1, absorbing by majority.
     # (0, 1) -> 1, 2: a tie, resolved to the prior's 2; (1, 0) -> 0, 3: tie, prior 1 absent, lowest 0.
-    s = np.array([[0], [0], [0], [0], [0], [1], [1]])
-    a = np.array([0, 0, 0, 1, 1, 0, 0])
-    s_next = np.array([[1], [1], [2], [1], [2], [3], [0]])
-    r = np.array([1.0, 3.0, 100.0, 5.0, 6.0, 0.0, 0.0])
-    absorbing = np.array([True, False, False, False, True, False, False])
-    apprentice = tabular.fit_tabular_apprentice(
-        Transitions(s, a, r, s_next, absorbing, np.ones(7, bool)), cells, prior)
+    # (2, 0) -> 2 with reward 7: what the prior says.
+    s = np.array([[0], [0], [0], [0], [0], [1], [1], [2]])
+    a = np.array([0, 0, 0, 1, 1, 0, 0, 0])
+    s_next = np.array([[1], [1], [2], [1], [2], [3], [0], [2]])
+    r = np.array([1.0, 3.0, 100.0, 5.0, 6.0, 0.0, 0.0, 7.0])
+    absorbing = np.array([True, False, False, False, True, False, False, False])
+    data = Transitions(s, a, r, s_next, absorbing, np.ones(8, bool))
+    apprentice = tabular.fit_tabular_apprentice(data, cells, prior, prior_scope="unvisited")
     model = apprentice.model()
     assert model.next_state.tolist() == [[1, 2], [0, 1], [2, 2], [3, 3]]
     assert model.reward.tolist() == [[2.0, 6.0], [0.0, 7.0], [7.0, 7.0], [7.0, 7.0]]
     assert model.absorbing.tolist() == [[True, True], [False, False], [False, False], [False, False]]
-    assert apprentice.visited.tolist() == [[True, True], [True, False], [False, False], [False, False]]
+    assert apprentice.visited.tolist() == [[True, True], [True, False], [True, False], [False, False]]
+    # By default the prior is trusted only in cells whose data agree with it: cell 1's visited
+    # pair contradicts it, so (1, 1) stays in place with reward 0; cell 2's agrees, so (2, 1) keeps it.
+    model = tabular.fit_tabular_apprentice(data, cells, prior).model()
+    assert model.next_state.tolist() == [[1, 2], [0, 1], [2, 2], [3, 3]]
+    assert model.reward.tolist() == [[2.0, 6.0], [0.0, 0.0], [7.0, 7.0], [7.0, 7.0]]
+    with pytest.raises(ValueError, match=r"prior_scope must be one of \('agreeing-cells', 'unvisited'\)"):
+        tabular.fit_tabular_apprentice(data, cells, prior, prior_scope="everywhere")
 
 
 def test_replanner_with_the_exact_model_is_optimal_from_every_start():

@@ -20,7 +20,14 @@ source trajectory one step at a time it replans:
 2. Where a pair was never visited, the apprentice falls back to a prior model:
    the source model carried through the mapping (:func:`mapped_model`; for the
    identity mapping, the source's own table), or, for the ablation without the
-   source prior, :func:`uninformed_model` (stay in place, reward 0).
+   source prior, :func:`uninformed_model` (stay in place, reward 0). By default
+   (``prior_scope="agreeing-cells"``) the source prior is trusted only in cells
+   whose visited pairs all agree with it; the unvisited pairs of a cell where the
+   target was seen to differ stay in place with reward 0. Why: a batch policy
+   cannot correct itself, and an unvisited source move that the target turns
+   aside (the wind blowing the agent back off the goal) traps it in a loop. On
+   the windy grid this raised the final return at 5000 random samples from
+   9.0-9.4 to 9.9-10 (3 seeds), and the returns at 500-2000 samples too.
 3. :func:`replan` runs exact Q-iteration on that merged model and acts greedily
    (:class:`ReplanPolicy`).
 
@@ -53,6 +60,9 @@ from tatl_mj.transitions import Transitions
 
 IndexPolicy = Callable[[np.ndarray], np.ndarray]
 """(N, d) states -> (N,) action indices."""
+
+PRIOR_SCOPES = ("agreeing-cells", "unvisited")
+"""Where a :class:`TabularApprentice` uses its fallback for unvisited pairs."""
 
 SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """One batched source-simulator step: (N, dS) states, (N,) action indices -> (N, dS)."""
@@ -204,6 +214,11 @@ class TabularApprentice:
       absorbing_count: (S, A, S) int64, how many of them ended the episode.
       fallback: the model used for unvisited pairs (:func:`mapped_model` of the
         source, or :func:`uninformed_model`).
+      prior_scope: ``"agreeing-cells"`` (default): an unvisited pair takes the
+        fallback only if every visited pair of its cell agrees with the fallback
+        (same next cell, reward and absorbing flag; a cell without data agrees),
+        else it stays in place with reward 0. ``"unvisited"``: every unvisited
+        pair takes the fallback.
 
     Prediction for a visited pair: the next cell with the most counts; on a tie
     the fallback's next cell if it is among the tied ones, else the lowest cell
@@ -215,8 +230,11 @@ class TabularApprentice:
     reward_sum: np.ndarray
     absorbing_count: np.ndarray
     fallback: TabularModel
+    prior_scope: str = "agreeing-cells"
 
     def __post_init__(self) -> None:
+        if self.prior_scope not in PRIOR_SCOPES:
+            raise ValueError(f"TabularApprentice.prior_scope must be one of {PRIOR_SCOPES}, got {self.prior_scope!r}")
         if not isinstance(self.fallback, TabularModel):
             raise ValueError(f"TabularApprentice.fallback must be a TabularModel, got {type(self.fallback).__name__}")
         shape = (self.fallback.n_cells, self.fallback.n_actions, self.fallback.n_cells)
@@ -247,9 +265,20 @@ class TabularApprentice:
         n = self.counts[cell, action, nxt]
         visited = n > 0
         safe = np.maximum(n, 1)
-        reward = np.where(visited, self.reward_sum[cell, action, nxt] / safe, self.fallback.reward)
-        absorbing = np.where(visited, 2 * self.absorbing_count[cell, action, nxt] >= n, self.fallback.absorbing)
-        return TabularModel(np.where(visited, nxt, prior), reward, absorbing)
+        seen_reward = self.reward_sum[cell, action, nxt] / safe
+        seen_absorbing = 2 * self.absorbing_count[cell, action, nxt] >= n
+        fb = self.fallback
+        if self.prior_scope == "agreeing-cells":
+            differs = visited & ((nxt != fb.next_state) | (seen_reward != fb.reward) | (seen_absorbing != fb.absorbing))
+            distrusted = differs.any(axis=1, keepdims=True) & ~visited
+            fb = TabularModel(
+                np.where(distrusted, cell, fb.next_state), np.where(distrusted, 0.0, fb.reward),
+                fb.absorbing & ~distrusted,
+            )
+        return TabularModel(
+            np.where(visited, nxt, fb.next_state), np.where(visited, seen_reward, fb.reward),
+            np.where(visited, seen_absorbing, fb.absorbing),
+        )
 
     def predict(self, cells: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """(N,) cell indices, (N,) action indices -> (N,) predicted next cell indices."""
@@ -262,9 +291,10 @@ class TabularApprentice:
 
 
 def fit_tabular_apprentice(
-    samples: Transitions, cell_map: CellMap, fallback: TabularModel
+    samples: Transitions, cell_map: CellMap, fallback: TabularModel, prior_scope: str = "agreeing-cells",
 ) -> TabularApprentice:
-    """Counts ``samples`` (states and next states must be cells of ``cell_map``)."""
+    """Counts ``samples`` (states and next states must be cells of ``cell_map``);
+    ``prior_scope`` as in :class:`TabularApprentice`."""
     if fallback.n_cells != cell_map.n_cells:
         raise ValueError(f"fallback has {fallback.n_cells} cells, cell_map has {cell_map.n_cells}")
     n_cells, n_actions = fallback.n_cells, fallback.n_actions
@@ -280,6 +310,7 @@ def fit_tabular_apprentice(
         reward_sum=np.bincount(flat, weights=samples.rewards, minlength=size).reshape(shape),
         absorbing_count=np.bincount(flat, weights=samples.absorbing, minlength=size).reshape(shape).astype(np.int64),
         fallback=fallback,
+        prior_scope=prior_scope,
     )
 
 
@@ -459,7 +490,7 @@ def _state(timestep: dm_env.TimeStep) -> np.ndarray:
 
 
 __all__ = [
-    "CellMap", "OneStepDecision", "OneStepRule", "ReplanPolicy", "ReplanStep", "TabularApprentice",
+    "PRIOR_SCOPES", "CellMap", "OneStepDecision", "OneStepRule", "ReplanPolicy", "ReplanStep", "TabularApprentice",
     "TabularModel", "fit_tabular_apprentice", "mapped_model", "policy_transitions", "replan",
     "uninformed_model",
 ]
