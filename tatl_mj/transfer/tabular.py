@@ -27,7 +27,10 @@ source trajectory one step at a time it replans:
    cannot correct itself, and an unvisited source move that the target turns
    aside (the wind blowing the agent back off the goal) traps it in a loop. On
    the windy grid this raised the final return at 5000 random samples from
-   9.0-9.4 to 9.9-10 (3 seeds), and the returns at 500-2000 samples too.
+   9.0-9.4 to 9.9-10 (3 seeds), and the returns at 500-2000 samples too. With
+   the paper's protocol data (the source policy from random starts, about one
+   action per cell) it discards the prior almost everywhere and fails (returns
+   -27 to -6); use ``prior_scope="unvisited"`` there (9.0-10 from 100 starts).
 3. :func:`replan` runs exact Q-iteration on that merged model and acts greedily
    (:class:`ReplanPolicy`).
 
