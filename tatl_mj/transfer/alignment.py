@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from typing import Callable, Protocol, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
@@ -45,7 +45,7 @@ import scipy.sparse
 from scipy.spatial import distance
 from sklearn import neighbors
 
-from tatl_mj.transfer.features import as_states
+from tatl_mj.transfer.features import as_states, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
 
 
@@ -302,25 +302,146 @@ def align_manifolds(
 SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
+def _unwrapped(t: Transitions, mask: tuple[bool, ...] | None) -> Transitions:
+    """``t`` with next states written as ``s + wrapped increment``, so increments are the motion."""
+    return dataclasses.replace(t, next_states=t.states + _wrap(t.next_states - t.states, mask))
+
+
 def _subset(t: Transitions, idx: np.ndarray) -> Transitions:
     return Transitions(*(getattr(t, f.name)[idx] for f in dataclasses.fields(Transitions)))
 
 
-def _through(shared: LinearAlignment, m_z: np.ndarray) -> AffineMapping:
-    """The affine state map ``z_T = m_z z_S`` in ``shared``'s standardised coordinates."""
-    matrix = np.linalg.inv(shared.target_whitener) @ m_z @ shared.source_whitener
-    return AffineMapping(matrix, shared.target_mean - matrix @ shared.source_mean)
+def _wrap(increments: np.ndarray, periodic: tuple[bool, ...] | None) -> np.ndarray:
+    """Increments with the angle coordinates (``periodic``) wrapped into [-pi, pi)."""
+    if periodic is None:
+        return increments
+    wrapped = increments.copy()
+    mask = np.asarray(periodic)
+    wrapped[:, mask] = wrap_angle(wrapped[:, mask])
+    return wrapped
 
 
-def _increment_model(z: np.ndarray, z_next: np.ndarray, actions: np.ndarray, n_actions: int):
-    """Least-squares ``z' - z = F z + e[a]``: one state matrix, one offset per action index.
+def _consistency(
+    mapping: Mapping, target: Transitions, source_step: SourceStep, scale: np.ndarray | None,
+    rate: float | None, source_mask: tuple[bool, ...] | None, target_mask: tuple[bool, ...] | None,
+) -> tuple[float, float]:
+    """(score, rate) of :func:`dynamics_consistency`, the rate fitted when None."""
+    x = mapping.chi_plus(target.states)
+    source_increment = _wrap(source_step(x, target.actions) - x, source_mask)
+    # A mapping that wraps its images (e.g. InCoordinates) jumps by 2 pi where a
+    # step crosses the cut; the motion is the wrapped difference.
+    mapped = _wrap(mapping.chi(x + source_increment) - mapping.chi(x), target_mask)
+    observed = _wrap(target.next_states - target.states, target_mask)
+    scale = np.maximum(observed.std(axis=0) if scale is None else np.asarray(scale, np.float64), 1e-12)
+    mapped, observed = mapped / scale, observed / scale
+    if rate is None:
+        rate = max(float(np.sum(mapped * observed) / max(np.sum(mapped * mapped), 1e-300)), 0.0)
+    return float(np.mean((observed - rate * mapped) ** 2)), float(rate)
 
-    Offsets per index rather than ``B u`` need no assumption on how the two
-    tasks' action values compare, only Assumption 1 (actions matched by index).
+
+def dynamics_consistency(
+    mapping: Mapping,
+    target: Transitions,
+    source_step: SourceStep,
+    scale: np.ndarray | None = None,
+    rate: float | None = 1.0,
+    source_periodic: tuple[bool, ...] | None = None,
+    target_periodic: tuple[bool, ...] | None = None,
+) -> float:
+    """How well the source simulator, seen through the mapping, predicts target transitions.
+
+    The mean squared difference, per coordinate, between the target increment
+    ``s'_T - s_T`` and ``rate`` times the mapped source increment
+    ``chi(x + P_S(x, a) - x) - chi(x)`` with ``x = chi_plus(s_T)`` (actions matched
+    by index). Increments of the coordinates flagged ``*_periodic`` are wrapped
+    into [-pi, pi): the source's before it is mapped, the target's and the
+    mapped one after, so a step across +-pi counts as the short motion it is.
+    Each coordinate is divided by ``scale`` (default: the standard deviation of
+    the target's increments), so 1.0 is as good as predicting "no change".
+    ``rate`` is how many source steps one target step spans; None fits it
+    (least squares, >= 0), since two domains' control steps need not cover the
+    same stretch of their motion and a state map cannot absorb that.
     """
-    design = np.hstack([z, np.eye(n_actions)[actions]])
-    theta, *_ = np.linalg.lstsq(design, z_next - z, rcond=None)
-    return theta[: z.shape[1]].T, theta[z.shape[1]:]  # F (d, d), e (n_actions, d)
+    source_mask = periodic_mask(source_periodic, None, "source_periodic")
+    target_mask = periodic_mask(target_periodic, target.state_dim, "target_periodic")
+    return _consistency(mapping, target, source_step, scale, rate, source_mask, target_mask)[0]
+
+
+def _positive_int(value: Any, least: int, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
+    return int(value)
+
+
+@dataclasses.dataclass(frozen=True)
+class TransitionAlignment:
+    """Settings of :func:`align_transitions` (``mapping.kind = "transition_alignment"``).
+
+    Attributes:
+      n_neighbors: neighbourhood size of the state-only candidates (:func:`align_manifolds`).
+      mu: correspondence weight of the state-only candidates.
+      max_samples: each side is subsampled to at most this many transitions.
+      rates: time-rate factors (target steps per source step) tried for the
+        model-consistent candidates; the control steps of two domains need not
+        cover the same stretch of their motion.
+      sign_flips: also try the state-only alignment with each shared coordinate's
+        sign flipped (2^d candidates, d <= 6).
+    """
+
+    n_neighbors: int = 8
+    mu: float = 1.0
+    max_samples: int = 1500
+    rates: tuple[float, ...] = tuple(float(r) for r in np.geomspace(0.125, 8.0, 13))
+    sign_flips: bool = True
+
+    def __post_init__(self) -> None:
+        _positive_int(self.n_neighbors, 2, "TransitionAlignment.n_neighbors")
+        _positive_int(self.max_samples, 10, "TransitionAlignment.max_samples")
+        mu_ok = not isinstance(self.mu, bool) and isinstance(self.mu, (int, float)) and np.isfinite(self.mu)
+        if not (mu_ok and self.mu > 0):
+            raise ValueError(f"TransitionAlignment.mu must be a finite number > 0, got {self.mu!r}")
+        rates = np.asarray(self.rates, dtype=np.float64).ravel() if np.ndim(self.rates) in (0, 1) else None
+        if rates is None or len(rates) == 0 or not np.all(np.isfinite(rates) & (rates > 0)):
+            raise ValueError(f"TransitionAlignment.rates must be a non-empty list of numbers > 0, got {self.rates!r}")
+        if not isinstance(self.sign_flips, bool):
+            raise ValueError(f"TransitionAlignment.sign_flips must be true or false, got {self.sign_flips!r}")
+        object.__setattr__(self, "rates", tuple(rates.tolist()))
+
+    @staticmethod
+    def from_dict(table: dict[str, Any]) -> "TransitionAlignment":
+        """Settings from a spec table; unknown keys are refused, naming the valid ones."""
+        valid = [f.name for f in dataclasses.fields(TransitionAlignment)]
+        unknown = sorted(set(table) - set(valid))
+        if unknown:
+            raise ValueError(f"unknown transition_alignment setting(s) {unknown}; valid: {valid}")
+        return TransitionAlignment(**table)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _IncrementModel:
+    """Least-squares ``z' - z = F z + e[a]`` in standardised coordinates ``z = (s - mean) @ white.T``.
+
+    One state matrix and one offset per action index rather than ``B u``: that
+    needs no assumption on how two tasks' action values compare, only
+    Assumption 1 (actions matched by index).
+    """
+
+    mean: np.ndarray
+    white: np.ndarray
+    f: np.ndarray  # (d, d)
+    e: np.ndarray  # (n_actions, d)
+
+    @staticmethod
+    def fit(t: Transitions, n_actions: int, name: str) -> "_IncrementModel":
+        mean, white = _standardiser(t.states, f"{name}.states", True)
+        z, z_next = (t.states - mean) @ white.T, (t.next_states - mean) @ white.T
+        design = np.hstack([z, np.eye(n_actions)[t.actions]])
+        theta, *_ = np.linalg.lstsq(design, z_next - z, rcond=None)
+        return _IncrementModel(mean, white, theta[: z.shape[1]].T, theta[z.shape[1]:])
+
+    def step(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        z = (states - self.mean) @ self.white.T
+        return (z + z @ self.f.T + self.e[actions]) @ np.linalg.inv(self.white).T + self.mean
 
 
 def _consistent_map(f_s, e_s, f_t, e_t) -> tuple[np.ndarray, np.ndarray]:
@@ -347,66 +468,69 @@ def _consistent_map(f_s, e_s, f_t, e_t) -> tuple[np.ndarray, np.ndarray]:
     return solution[:n_m].reshape(d_t, d_s), solution[n_m:]
 
 
-def _wrap(increments: np.ndarray, periodic: np.ndarray | None) -> np.ndarray:
-    """Increments with the angle coordinates (``periodic``) wrapped into [-pi, pi)."""
-    if periodic is None:
-        return increments
-    wrapped = increments.copy()
-    wrapped[:, periodic] = (wrapped[:, periodic] + np.pi) % (2.0 * np.pi) - np.pi
-    return wrapped
+def _model_candidates(
+    source: _IncrementModel, target: _IncrementModel, rates: tuple[float, ...],
+) -> list[tuple[str, AffineMapping]]:
+    """One affine map per rate factor: the map that makes the two increment models agree."""
+    unwhite_t = np.linalg.inv(target.white)
+    candidates = []
+    for rate in rates:
+        m_z, o_z = _consistent_map(rate * source.f, rate * source.e, target.f, target.e)
+        # z_T = m_z z_S + o_z, written in state units.
+        matrix = unwhite_t @ m_z @ source.white
+        candidates.append((f"model rate {rate:.4g}",
+                           AffineMapping(matrix, target.mean + unwhite_t @ o_z - matrix @ source.mean)))
+    return candidates
 
 
-def _periodic_mask(periodic, dim: int, name: str) -> np.ndarray | None:
-    if periodic is None:
-        return None
-    mask = np.asarray(periodic, dtype=bool).ravel()
-    if mask.shape != (dim,):
-        raise ValueError(f"{name} must hold one flag per state coordinate ({dim}), got {len(mask)}")
-    return mask
+def _sign_flip_candidates(shared: LinearAlignment) -> list[tuple[str, AffineMapping]]:
+    """The state-only alignment with each shared coordinate's sign flipped (2^d maps).
 
-
-def dynamics_consistency(
-    mapping: Mapping, target: Transitions, source_step: SourceStep, scale: np.ndarray | None = None,
-    rate: float | None = 1.0, source_periodic=None, target_periodic=None,
-) -> float:
-    """How well the source simulator, seen through the mapping, predicts target transitions.
-
-    The mean squared difference, per coordinate, between the target increment
-    ``s'_T - s_T`` and ``rate`` times the mapped source increment
-    ``chi(x + P_S(x, a) - x) - chi(x)`` with ``x = chi_plus(s_T)`` (actions matched
-    by index; increments of the coordinates flagged ``*_periodic`` wrapped into
-    [-pi, pi)). Each coordinate is divided by ``scale`` (default: the standard
-    deviation of the target's increments), so 1.0 is as good as predicting "no
-    change". ``rate`` is how many source steps one target step spans; None fits it
-    (least squares, >= 0), since two domains' control steps need not cover the
-    same stretch of their motion and a state map cannot absorb that.
+    Flipping shared coordinate k on one side only (alpha's column k) composes chi
+    with a reflection: ``chi_z = pinv(beta^T) diag(signs) alpha^T``; all signs +1
+    is the original. These are the ambiguities local geometry cannot resolve.
     """
-    x = mapping.chi_plus(target.states)
-    source_mask = _periodic_mask(source_periodic, x.shape[1], "source_periodic")
-    target_mask = _periodic_mask(target_periodic, target.state_dim, "target_periodic")
-    mapped = mapping.chi(x + _wrap(source_step(x, target.actions) - x, source_mask)) - mapping.chi(x)
-    observed = _wrap(target.next_states - target.states, target_mask)
-    scale = np.maximum(observed.std(axis=0) if scale is None else np.asarray(scale, np.float64), 1e-12)
-    mapped, observed = mapped / scale, observed / scale
-    if rate is None:
-        rate = max(float(np.sum(mapped * observed) / max(np.sum(mapped * mapped), 1e-300)), 0.0)
-    return float(np.mean((observed - rate * mapped) ** 2))
+    candidates = []
+    for signs in itertools.product((1.0, -1.0), repeat=shared.alpha.shape[1]):
+        m_z = np.linalg.pinv(shared.beta.T) @ (np.asarray(signs)[:, None] * shared.alpha.T)
+        matrix = np.linalg.inv(shared.target_whitener) @ m_z @ shared.source_whitener
+        candidates.append((f"states signs {[int(s) for s in signs]}",
+                           AffineMapping(matrix, shared.target_mean - matrix @ shared.source_mean)))
+    return candidates
+
+
+def _checked_pair(
+    source: Transitions, target: Transitions, n_source_actions: int, n_target_actions: int,
+) -> int:
+    """Validates the two batches against Assumption 1; returns the shared action count."""
+    for name, value in (("source", source), ("target", target)):
+        if not isinstance(value, Transitions):
+            raise ValueError(f"{name} must be a Transitions batch, got {type(value).__name__}")
+    n_s = _positive_int(n_source_actions, 2, "n_source_actions")
+    n_t = _positive_int(n_target_actions, 2, "n_target_actions")
+    if n_s != n_t:
+        raise ValueError(
+            "n_source_actions and n_target_actions must be the same number of actions "
+            f"(Assumption 1: matched by index), got {n_s} and {n_t}"
+        )
+    for name, value in (("source", source), ("target", target)):
+        if value.actions.min() < 0 or value.actions.max() >= n_s:
+            raise ValueError(f"{name}.actions must index the {n_s} actions (0..{n_s - 1})")
+    return n_s
 
 
 def align_transitions(
     source: Transitions,
     target: Transitions,
-    source_actions: np.ndarray,
-    target_actions: np.ndarray,
-    n_neighbors: int = 8,
-    mu: float = 1.0,
-    rng: np.random.Generator | None = None,
+    n_source_actions: int,
+    n_target_actions: int,
+    *,
+    source_periodic: tuple[bool, ...] | None = None,
+    target_periodic: tuple[bool, ...] | None = None,
     source_step: SourceStep | None = None,
-    max_samples: int = 1500,
-    rates: tuple[float, ...] = tuple(np.geomspace(0.125, 8.0, 13)),
-    source_periodic=None,
-    target_periodic=None,
-) -> AffineMapping:
+    settings: TransitionAlignment = TransitionAlignment(),
+    rng: np.random.Generator | None = None,
+) -> tuple[AffineMapping, dict[str, Any]]:
     """A state mapping from random transitions of both tasks, chosen by dynamics consistency.
 
     State samples alone leave a map defined only up to the symmetries of the
@@ -419,101 +543,72 @@ def align_transitions(
     source simulator, seen through the map, should reproduce the target's
     transitions, as TA-TL's Algorithm 1 assumes when it queries it):
 
-    1. Standardise each side's states (centre, whiten) as :func:`align_manifolds`.
-    2. Candidates: (a) the state-only alignment with each shared coordinate's sign
-       flipped (all 2^d combinations: the ambiguities local geometry cannot
-       resolve); (b) for each time-rate factor in ``rates`` (target steps per
-       source step), the affine map that makes the two tasks' least-squares
-       linear increment models agree (:func:`_consistent_map`).
-    3. Keep the candidate with the least :func:`dynamics_consistency` (rate fitted)
-       on the target transitions: the source step (``source_step``, e.g. the source simulator;
-       default: the source's fitted linear model) from ``chi_plus(s_T)`` under the
-       same action index, mapped back by ``chi``, should land on ``s'_T``.
+    1. Candidates: (a) for each time-rate factor in ``settings.rates``, the
+       affine map that makes the two tasks' least-squares linear increment models
+       agree (``_model_candidates``); (b) the state-only alignment with each
+       shared coordinate's sign flipped (``_sign_flip_candidates``).
+    2. Keep the candidate with the least :func:`dynamics_consistency` (rate
+       fitted) on the target transitions, stepping with ``source_step`` (e.g. the
+       source simulator; default: the source's fitted linear model).
+
+    The map is affine in the coordinates the batches are given in; for a
+    periodic coordinate cut in the wrong place use
+    :func:`tatl_mj.transfer.coordinates.align_in_coordinates`.
 
     Args:
       source, target: random-policy transitions of each task.
-      source_actions, target_actions: (n, ...) each task's discrete action set;
-        they must have the same number of actions (matched by index).
-      n_neighbors, mu, rng, max_samples: as in :func:`align_manifolds` (for the
-        state-only candidates, and rng draws subsamples of larger sets).
-      source_step: batched source step (N, dS), (N,) action indices -> (N, dS).
-      rates: the time-rate factors tried for the model-consistent candidates.
+      n_source_actions, n_target_actions: each task's number of discrete actions;
+        they must agree (actions are matched by index).
       source_periodic, target_periodic: optional per-coordinate flags of angles,
         whose increments are wrapped into [-pi, pi) (a pendulum passing +-pi).
+      source_step: batched source step (N, dS), (N,) action indices -> (N, dS).
+      settings: :class:`TransitionAlignment`.
+      rng: draws subsamples of sets larger than ``settings.max_samples``.
 
     Returns:
-      An :class:`AffineMapping` on states (chi: source -> target).
+      The chosen :class:`AffineMapping` (chi: source -> target) and its record
+      for the run's files: ``matrix``, ``offset`` (lists), ``candidate`` (which
+      one won), ``rate`` (fitted target steps per source step), ``consistency``
+      (its score) and ``candidates`` (the number compared).
     """
-    for name, value in (("source", source), ("target", target)):
-        if not isinstance(value, Transitions):
-            raise ValueError(f"{name} must be a Transitions batch, got {type(value).__name__}")
-    n_actions = len(np.asarray(source_actions))
-    if n_actions != len(np.asarray(target_actions)) or n_actions < 2:
-        raise ValueError(
-            "source_actions and target_actions must have the same number (>= 2) of actions "
-            f"(Assumption 1: matched by index), got {n_actions} and {len(np.asarray(target_actions))}"
-        )
-    for name, value in (("source", source), ("target", target)):
-        if value.actions.min() < 0 or value.actions.max() >= n_actions:
-            raise ValueError(f"{name}.actions must index the {n_actions} actions (0..{n_actions - 1})")
-    periodic = (_periodic_mask(source_periodic, source.state_dim, "source_periodic"),
-                _periodic_mask(target_periodic, target.state_dim, "target_periodic"))
-    # Unwrapped next states, so increments are the motion (not a 2 pi jump).
-    source, target = (
-        dataclasses.replace(t, next_states=t.states + _wrap(t.next_states - t.states, mask))
-        for t, mask in zip((source, target), periodic)
-    )
+    n_actions = _checked_pair(source, target, n_source_actions, n_target_actions)
+    if not isinstance(settings, TransitionAlignment):
+        raise ValueError(f"settings must be a TransitionAlignment, got {type(settings).__name__}")
+    masks = (periodic_mask(source_periodic, source.state_dim, "source_periodic"),
+             periodic_mask(target_periodic, target.state_dim, "target_periodic"))
+    source, target = _unwrapped(source, masks[0]), _unwrapped(target, masks[1])
     rng = rng if rng is not None else np.random.default_rng(0)
-    if len(source) > max_samples:
-        source = _subset(source, rng.choice(len(source), max_samples, replace=False))
-    if len(target) > max_samples:
-        target = _subset(target, rng.choice(len(target), max_samples, replace=False))
+    if len(source) > settings.max_samples:
+        source = _subset(source, rng.choice(len(source), settings.max_samples, replace=False))
+    if len(target) > settings.max_samples:
+        target = _subset(target, rng.choice(len(target), settings.max_samples, replace=False))
 
-    mean_s, white_s = _standardiser(source.states, "source.states", True)
-    mean_t, white_t = _standardiser(target.states, "target.states", True)
-    unwhite_s, unwhite_t = np.linalg.inv(white_s), np.linalg.inv(white_t)
+    source_model = _IncrementModel.fit(source, n_actions, "source")
+    candidates = _model_candidates(source_model, _IncrementModel.fit(target, n_actions, "target"), settings.rates)
+    if settings.sign_flips and min(source.state_dim, target.state_dim) <= 6:
+        shared = align_manifolds(source.states, target.states, n_neighbors=settings.n_neighbors,
+                                 mu=settings.mu, rng=rng, max_samples=settings.max_samples)
+        candidates += _sign_flip_candidates(shared)
 
-    def to_states(m_z: np.ndarray, o_z: np.ndarray) -> AffineMapping:
-        # z_T = m_z z_S + o_z, with z = (s - mean) @ W.T, written in state units.
-        matrix = unwhite_t @ m_z @ white_s
-        return AffineMapping(matrix, mean_t + unwhite_t @ o_z - matrix @ mean_s)
-
-    def standardised(t: Transitions, mean, white):
-        return (t.states - mean) @ white.T, (t.next_states - mean) @ white.T
-
-    zs, zs_next = standardised(source, mean_s, white_s)
-    zt, zt_next = standardised(target, mean_t, white_t)
-    f_s, e_s = _increment_model(zs, zs_next, source.actions, n_actions)
-    f_t, e_t = _increment_model(zt, zt_next, target.actions, n_actions)
-
-    candidates = [to_states(*_consistent_map(rate * f_s, rate * e_s, f_t, e_t)) for rate in rates]
-    states_only = align_manifolds(
-        source.states, target.states, n_neighbors=n_neighbors, mu=mu, rng=rng, max_samples=max_samples,
-    )
-    # Flipping shared coordinate k on one side only (alpha's column k) composes chi with
-    # a reflection: chi_z = pinv(beta^T) diag(signs) alpha^T. All signs +1 is the original.
-    d_shared = states_only.alpha.shape[1]
-    if d_shared <= 6:  # 2^d candidates
-        for signs in itertools.product((1.0, -1.0), repeat=d_shared):
-            m_z = np.linalg.pinv(states_only.beta.T) @ (np.asarray(signs)[:, None] * states_only.alpha.T)
-            candidates.append(_through(states_only, m_z))
-
-    if source_step is None:
-        def source_step(states: np.ndarray, actions: np.ndarray) -> np.ndarray:
-            z = (states - mean_s) @ white_s.T
-            return (z + z @ f_s.T + e_s[actions]) @ unwhite_s.T + mean_s
-
+    step = source_step if source_step is not None else source_model.step
     scores = []
-    for candidate in candidates:
+    for _, candidate in candidates:
         try:
-            scores.append(dynamics_consistency(candidate, target, source_step, rate=None,
-                                               source_periodic=periodic[0], target_periodic=periodic[1]))
+            scores.append(_consistency(candidate, target, step, None, None, *masks))
         except ValueError:  # e.g. a mapped state the source simulator rejects
-            scores.append(np.inf)
-    return candidates[int(np.argmin(scores))]
+            scores.append((np.inf, 0.0))
+    best = int(np.argmin([score for score, _ in scores]))
+    if not np.isfinite(scores[best][0]):
+        raise ValueError("align_transitions: the source step rejected every candidate map's states")
+    label, mapping = candidates[best]
+    record = {
+        "kind": "transition_alignment", "matrix": mapping.matrix.tolist(), "offset": mapping.offset.tolist(),
+        "candidate": label, "rate": scores[best][1], "consistency": scores[best][0], "candidates": len(candidates),
+    }
+    return mapping, record
 
 
 __all__ = [
-    "AffineMapping", "IdentityMapping", "LinearAlignment", "Mapping", "align_manifolds",
+    "AffineMapping", "IdentityMapping", "LinearAlignment", "Mapping", "TransitionAlignment", "align_manifolds",
     "align_transitions", "correspondences", "dynamics_consistency", "local_geometry",
 ]
