@@ -20,8 +20,8 @@ wraps ``suite.load(domain, task)``:
   function of ``s``; ``render()`` draws the ``"tracking"`` camera.
 
 ``gym.make(id, task_kwargs={...})`` passes task options (e.g. ``time_limit``) to
-``suite.load``. The grid world (already discrete and without a MuJoCo model) is
-not registered. Gymnasium is an optional dependency (the ``test`` extra).
+``suite.load``. Tasks that take action indices and have no MuJoCo model
+(``suite.describe(...).discrete``) are not registered. Gymnasium is an optional dependency (the ``test`` extra).
 """
 
 from __future__ import annotations
@@ -36,7 +36,9 @@ from tatl_mj import suite
 
 NAMESPACE = "tatl_mj"
 VERSION = 0
-PHYSICS_TASKS: tuple[tuple[str, str], ...] = tuple((d, t) for d, t in suite.ALL_TASKS if d != "gridworld")
+PHYSICS_TASKS: tuple[tuple[str, str], ...] = tuple(
+    (d, t) for d, t in suite.ALL_TASKS if not suite.describe(d, t).discrete
+)
 RENDER_MODES: tuple[str, ...] = ("rgb_array",)
 
 

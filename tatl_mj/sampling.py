@@ -578,3 +578,42 @@ def _evaluate_env(
                 still.append(i)
         live = np.asarray(still, np.int64)
     return returns, lengths
+
+
+def policy_transitions(
+    env: dm_env.Environment,
+    policy: Callable[[np.ndarray], np.ndarray],
+    n: int,
+    actions: np.ndarray,
+    max_episode_steps: int | None = None,
+) -> Transitions:
+    """``n`` transitions of ``policy`` acting in ``env``, episode after episode from its resets.
+
+    The paper's protocol for the apprentice's data ("randomly sampled starting
+    positions, execute pi*(S) in the target"): load ``env`` with its random start
+    and ``random`` seed. ``policy`` maps a (1, d) state to (1,) indices into
+    ``actions`` (what ``env.step`` takes for each index). Episodes end at the task's
+    own end or after ``max_episode_steps``; the last one is cut at ``n``.
+    ``absorbing`` marks ends with discount 0 and ``last`` each episode's final transition.
+    """
+    n = _check_count("n", n, 1)
+    if max_episode_steps is not None:
+        _check_count("max_episode_steps", max_episode_steps, 1)
+    rows: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "next_states", "absorbing", "last")}
+    while len(rows["states"]) < n:
+        timestep = env.reset()
+        state, steps = _observed_state(timestep), 0
+        while len(rows["states"]) < n:
+            index = _check_indices(policy(state[None]), 1, len(actions))[0]
+            timestep = env.step(actions[index])
+            steps += 1
+            next_state = _observed_state(timestep)
+            last = timestep.last() or steps == max_episode_steps or len(rows["states"]) + 1 == n
+            for key, value in (("states", state), ("actions", index), ("rewards", timestep.reward),
+                               ("next_states", next_state), ("last", last),
+                               ("absorbing", timestep.last() and timestep.discount == 0.0)):
+                rows[key].append(value)
+            if last:
+                break
+            state = next_state
+    return Transitions(**{k: np.asarray(v) for k, v in rows.items()})

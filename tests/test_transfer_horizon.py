@@ -286,3 +286,20 @@ def test_rejects_mismatched_states():
         policy(np.zeros((1, 2)))
     with pytest.raises(ValueError, match="NaN"):
         _goal_policy(integrator_step)(np.array([[np.nan, 0.0]]))
+
+
+def test_linearised_recovers_a_linear_model_and_cancels_fixed_seed_noise():
+    from tatl_mj.transfer.horizon import linearised
+
+    A = np.array([[1.0, 0.1], [-0.2, 0.95]])
+    B = np.array([[0.0], [0.3]])
+
+    def noisy_step(states, actions):  # noise drawn afresh from the same seed on every call
+        noise = np.random.default_rng(0).normal(size=states.shape) * 1e-3
+        return states @ A.T + actions @ B.T + noise
+
+    model = linearised(noisy_step, 2, 1)
+    s = np.array([[0.3, -0.1], [1.0, 2.0]])
+    a = np.array([[0.5], [-1.0]])
+    offset = np.random.default_rng(0).normal(size=(1, 2)) * 1e-3  # the first row's draw, constant
+    np.testing.assert_allclose(model(s, a), s @ A.T + a @ B.T + offset, atol=1e-9)

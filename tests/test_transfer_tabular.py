@@ -229,23 +229,25 @@ def test_policy_transitions_follows_the_policy_from_random_starts():
     apprentice = tabular.fit_tabular_apprentice(one_visit_per_pair(), CELLS, SOURCE)
     policy = tabular.replan(apprentice, CELLS, GAMMA)
 
-    def run(seed):
+    def run(seed, n=200):
         env = suite.load("gridworld", "windy", task_kwargs={"random": seed, "random_start": True})
-        return tabular.policy_transitions(env, policy, 20, gridworld.ACTIONS)
+        return sampling.policy_transitions(env, policy, n, gridworld.ACTIONS)
 
     data = run(3)
+    assert len(data) == 200 and data.last[-1]
     starts = np.flatnonzero(np.r_[True, data.last[:-1]])
-    assert len(starts) == 20 == data.last.sum()
     reference = suite.load("gridworld", "windy", task_kwargs={"random": 3, "random_start": True})
-    assert np.array_equal(data.states[starts], [reference.reset().observation["state"] for _ in range(20)])
+    assert np.array_equal(data.states[starts], [reference.reset().observation["state"] for _ in starts])
     s, s_next = CELLS.index(data.states), CELLS.index(data.next_states)
     assert np.array_equal(s_next, TARGET.next_state[s, data.actions])
     assert np.array_equal(data.actions, policy(data.states))
-    # The optimal policy ends every episode on the goal, earning the optimum from its start.
-    assert np.array_equal(data.absorbing, data.last) and np.all(s_next[data.last] == GOAL)
-    for start, end in zip(starts, np.r_[starts[1:], len(data)]):
+    # The optimal policy ends every whole episode on the goal, earning the optimum from its start
+    # (the last episode is cut at n transitions).
+    ends = np.r_[starts[1:], len(data)]
+    for start, end in zip(starts[:-1], ends[:-1]):
+        assert data.absorbing[end - 1] and s_next[end - 1] == GOAL
         discounted = np.sum(GAMMA ** np.arange(end - start) * data.rewards[start:end])
         assert discounted == pytest.approx(policy.q.q[s[start]].max(), abs=1e-9)
     assert np.array_equal(run(3).states, data.states)
-    with pytest.raises(ValueError, match="n_starts"):
-        tabular.policy_transitions(suite.load("gridworld", "windy"), policy, 0, gridworld.ACTIONS)
+    with pytest.raises(ValueError, match="n must be an integer >= 1"):
+        run(3, n=0)

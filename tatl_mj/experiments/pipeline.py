@@ -28,7 +28,7 @@ import numpy as np
 from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import alignment, fqi, method
+from tatl_mj.transfer import alignment, coordinates, fqi, method
 from tatl_mj.transitions import Transitions
 
 
@@ -50,6 +50,7 @@ class SourceArtifacts:
     mapping_source_samples: int
     source_samples: int
     timings: dict
+    mapping_record: dict | None = None  # the learned or given map's coefficients, for the records
 
 
 # --- data -----------------------------------------------------------------------
@@ -115,10 +116,53 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     return q, len(data)
 
 
-def _affine_mapping(spec: ExperimentSpec) -> "alignment.AffineMapping":
-    matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)  # its shape is checked at spec load
-    offset = np.asarray(spec.mapping.offset or np.zeros(len(matrix)), dtype=np.float64)
-    return alignment.AffineMapping(matrix, offset)
+def _coordinates(side: Side) -> coordinates.Coordinates:
+    description = describe(side)
+    return coordinates.Coordinates(description.periodic, description.angle_origin)
+
+
+def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
+    """The source's samples for a learned map: random-policy episodes unless the spec asks for its box."""
+    side = spec.source
+    if spec.mapping.source_data == "episodes":
+        side = dataclasses.replace(side, data=dataclasses.replace(side.data, sampling="episodes", state_low=(),
+                                                                   state_high=()))
+    return collect(side, n, derive_seed(seed, spec.name, "alignment-source"))
+
+
+def _learn_mapping(
+    spec: ExperimentSpec, preset: Preset, seed: int, target_stream: Transitions,
+) -> tuple[Any, dict | None, int, int]:
+    """Phase II: the mapping (in each task's mapping coordinates), its record, and the
+    source and target samples it used (the target's are the stream's head, reused later)."""
+    kind = spec.mapping.kind
+    if kind == "identity":
+        return alignment.IdentityMapping(), None, 0, 0
+    source_coords, target_coords = _coordinates(spec.source), _coordinates(spec.target)
+    if kind == "affine":
+        matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)  # its shape is checked at spec load
+        offset = np.asarray(spec.mapping.offset or np.zeros(len(matrix)), dtype=np.float64)
+        record = {"kind": kind, "matrix": matrix.tolist(), "offset": offset.tolist()}
+        inner = alignment.AffineMapping(matrix, offset)
+        return coordinates.InCoordinates(inner, source_coords, target_coords), record, 0, 0
+    n = preset.alignment_samples
+    source = _alignment_source(spec, n, seed)
+    target = target_stream.head(n)
+    rng = np.random.default_rng(derive_seed(seed, spec.name, "alignment"))
+    if kind == "transition_alignment":
+        settings = alignment.TransitionAlignment.from_dict(
+            {k: tuple(v) if isinstance(v, list) else v for k, v in spec.mapping.transition.items()}
+        )
+        mapping, record = coordinates.align_in_coordinates(
+            source, target, source_coords, target_coords, describe(spec.source).n_actions,
+            describe(spec.target).n_actions, settings=settings, rng=rng,
+        )
+        return mapping, record, len(source), len(target)
+    inner = alignment.align_manifolds(
+        source_coords.to_mapping(source.states), target_coords.to_mapping(target.states),
+        n_neighbors=spec.mapping.n_neighbors, mu=spec.mapping.mu, rng=rng,
+    )
+    return coordinates.InCoordinates(inner, source_coords, target_coords), None, len(source), len(target)
 
 
 def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtifacts:
@@ -134,20 +178,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     timings["target_sampling_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    if spec.mapping.kind == "identity":
-        mapping, n_map_source, n_map_target = alignment.IdentityMapping(), 0, 0
-    elif spec.mapping.kind == "affine":
-        mapping, n_map_source, n_map_target = _affine_mapping(spec), 0, 0
-    else:
-        source_states = collect(
-            spec.source, preset.alignment_samples, derive_seed(seed, spec.name, "alignment-source")
-        ).states
-        target_states = target_stream.states[: preset.alignment_samples]  # reused by the apprentice
-        mapping = alignment.align_manifolds(
-            source_states, target_states, n_neighbors=spec.mapping.n_neighbors, mu=spec.mapping.mu,
-            rng=np.random.default_rng(derive_seed(seed, spec.name, "alignment")),
-        )
-        n_map_source, n_map_target = len(source_states), len(target_states)
+    mapping, mapping_record, n_map_source, n_map_target = _learn_mapping(spec, preset, seed, target_stream)
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -158,6 +189,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
         source_q=source_q, mapping=mapping, target_stream=target_stream,
         random_return=float(np.mean(returns)), mapping_target_samples=n_map_target,
         mapping_source_samples=n_map_source, source_samples=source_samples, timings=timings,
+        mapping_record=mapping_record,
     )
 
 
@@ -186,6 +218,25 @@ def _target_step(target: Side, description: TaskDescription, states: np.ndarray,
         return sampling.step_from(target.domain, target.task, states, np.argmin(gaps, axis=1),
                                   task_kwargs=target.task_kwargs)
     return sampling.step_values_from(target.domain, target.task, states, values, task_kwargs=target.task_kwargs)
+
+
+def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -> Transitions:
+    """n target transitions of ``policy`` from the target's own (random) starts, seeded per seed."""
+    target = spec.target
+    env = suite.load(target.domain, target.task,
+                     task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.name, "policy-data")})
+    description = describe(target)
+    actions = np.arange(description.n_actions) if description.discrete else suite.action_set(target.domain)
+    index_policy = policy if description.discrete else _as_indices(policy, description.action_values)
+    return sampling.policy_transitions(env, index_policy, n, actions, max_episode_steps=target.data.episode_steps)
+
+
+def _as_indices(policy: Callable, action_values: np.ndarray) -> Callable:
+    """A policy over action values as one over the nearest discrete action's index."""
+    def indices(states: np.ndarray) -> np.ndarray:
+        values = np.asarray(policy(states), dtype=np.float64).reshape(len(states), -1)
+        return np.argmin(np.linalg.norm(values[:, None] - action_values[None], axis=2), axis=1)
+    return indices
 
 
 def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable | None:
@@ -243,6 +294,7 @@ def transfer_problem(
         target_return=target_return,
         model_return=_model_return(spec, preset, seed),
         target_step=partial(_target_step, spec.target, target),
+        policy_samples=partial(_policy_samples, spec, seed),
     )
 
 
@@ -271,8 +323,14 @@ def run_method(
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     problem = transfer_problem(spec, preset, artifacts, seed)
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
-    curve = []
+    # A method that uses no target samples (an oracle, a reference) learns the same
+    # policy at every budget: it is learned and evaluated once and its point repeated.
+    uses_samples = getattr(transfer, "uses_samples", True)
+    curve: list[dict] = []
     for budget in preset.target_budgets:
+        if curve and not uses_samples:
+            curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
+            continue
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -283,7 +341,7 @@ def run_method(
         curve.append({
             "samples": int(budget),
             # Algorithm 2 may stop before the budget; the curve still counts the budget.
-            "samples_used": int(getattr(policy, "samples_used", None) or budget),
+            "samples_used": int(getattr(policy, "samples_used", None) or budget) if uses_samples else 0,
             "mean_return": float(np.mean(returns)),
             "returns": [float(r) for r in returns],
             "mean_steps": float(np.mean(lengths)),

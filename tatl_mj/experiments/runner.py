@@ -63,6 +63,7 @@ def work(
                 "source_samples": artifacts.source_samples,
                 "mapping_source_samples": artifacts.mapping_source_samples,
                 "mapping_target_samples": artifacts.mapping_target_samples,
+                "mapping": artifacts.mapping_record,
                 "timings": artifacts.timings,
             }
         else:

@@ -23,7 +23,8 @@ from typing import Any
 
 SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
-MAPPING_KINDS = ("identity", "manifold_alignment", "affine")
+MAPPING_KINDS = ("identity", "manifold_alignment", "transition_alignment", "affine")
+ALIGNMENT_DATA = ("episodes", "uniform")
 
 
 class SpecError(ValueError):
@@ -77,10 +78,20 @@ class Learner:
 class MappingSpec:
     """The inter-task mapping chi (source -> target) and chi_plus (target -> source).
 
-    ``identity`` (same state space), ``manifold_alignment`` (learned without
-    supervision from random-policy samples; ``n_neighbors``, ``mu``), or
-    ``affine``: a hand-coded chi(s_S) = matrix s_S + offset, with ``matrix``
-    given as rows (dT rows of dS numbers) and an optional ``offset`` (dT).
+    ``identity`` (same state space); ``manifold_alignment`` (the paper's: learned
+    without supervision from random-policy states; ``n_neighbors``, ``mu``);
+    ``transition_alignment`` (Ammar et al.'s (s, a, s') triplets with the
+    dynamics-consistent choice of map; settings in ``transition``, see
+    ``alignment.TransitionAlignment``); or ``affine``: a hand-coded
+    chi(s_S) = matrix s_S + offset, ``matrix`` as rows (dT rows of dS numbers),
+    optional ``offset`` (dT).
+
+    Every map but the identity works in each task's mapping coordinates: its
+    description's periodic coordinates measured from their ``angle_origin`` (the
+    pendulum's angle from hanging), wrapped on the way in and out.
+    ``source_data``: where the learned maps' source samples come from:
+    ``"episodes"`` (random-policy episodes, like the target's; the default) or
+    ``"uniform"`` (the source side's uniform box, which must then be its sampling).
     """
 
     kind: str = "identity"
@@ -88,6 +99,8 @@ class MappingSpec:
     mu: float = 1.0
     matrix: tuple[tuple[float, ...], ...] = ()
     offset: tuple[float, ...] = ()
+    transition: dict = dataclasses.field(default_factory=dict)
+    source_data: str = "episodes"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -268,11 +281,25 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
         raise SpecError(f"{p}: keys 'mapping.matrix' and 'mapping.offset' apply only to kind 'affine'")
     if mapping.kind != "manifold_alignment" and (mapping.n_neighbors, mapping.mu) != (10, 1.0):
         raise SpecError(f"{p}: keys 'mapping.n_neighbors' and 'mapping.mu' apply only to kind 'manifold_alignment'")
+    if mapping.transition:
+        if mapping.kind != "transition_alignment":
+            raise SpecError(f"{p}: key 'mapping.transition' applies only to kind 'transition_alignment'")
+    if mapping.kind == "transition_alignment":
+        from tatl_mj.transfer.alignment import TransitionAlignment
+
+        try:
+            TransitionAlignment.from_dict({k: tuple(v) if isinstance(v, list) else v
+                                           for k, v in mapping.transition.items()})
+        except (TypeError, ValueError) as error:
+            raise SpecError(f"{p}: key 'mapping.transition': {error}") from None
+    _choice(p, "mapping.source_data", mapping.source_data, ALIGNMENT_DATA)
+    if mapping.source_data == "uniform" and spec.source.data.sampling != "uniform":
+        raise SpecError(f"{p}: key 'mapping.source_data' = 'uniform' needs source.data.sampling = 'uniform'")
     if mapping.n_neighbors < 1:
         _fail(p, "mapping.n_neighbors", "a positive integer", mapping.n_neighbors)
 
 
-def _check_methods(spec: ExperimentSpec, target: Any) -> None:
+def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
     from tatl_mj.transfer import registry
 
     p = spec.path
@@ -285,7 +312,7 @@ def _check_methods(spec: ExperimentSpec, target: Any) -> None:
             method = registry.build(name, settings)
             check = getattr(method, "check", None)
             if check is not None:
-                check(target)
+                check(source, target)
         except ValueError as error:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
 
@@ -300,7 +327,7 @@ def _check(spec: ExperimentSpec) -> None:
     _check_side(spec, "target", target)
     _check_source_learning(spec, source)
     _check_mapping(spec, source, target)
-    _check_methods(spec, target)
+    _check_methods(spec, source, target)
     if not spec.presets:
         raise SpecError(f"{p}: at least one [presets.NAME] table is required (e.g. smoke, paper)")
     for name, preset in spec.presets.items():

@@ -61,6 +61,11 @@ class TransferProblem:
       target_step: the real target simulator's one step, (N, dT) states, (N, mT)
         action values -> (N, dT); for oracle ablations only (it is not a sample
         budget a fair method may use).
+      policy_samples: ``policy_samples(policy, n)`` -> n target transitions from
+        episodes of ``policy`` from the target's start distribution: the paper's
+        protocol for the apprentice's data ("execute pi*(S) in the target from
+        random starts"), for a method that spends its budget that way instead of
+        on the shared random-policy stream.
     """
 
     source_q: QFunction
@@ -72,6 +77,7 @@ class TransferProblem:
     target_return: Callable[[Policy], float] | None = None
     model_return: Callable[[Model, Policy], float] | None = None
     target_step: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    policy_samples: Callable[[Policy, int], Transitions] | None = None
 
     def __post_init__(self) -> None:
         if self.source.n_actions != self.target.n_actions:
@@ -212,10 +218,10 @@ class TATL:
         for i, value in enumerate(self.adaptive_actions):
             _check_number(owner, f"adaptive_actions[{i}]", value, -math.inf)
 
-    def check(self, problem_target: TaskDescription) -> None:
-        """Settings that need the target's description (basis size, actuator)."""
-        check_features(type(self).__name__, "apprentice", self.apprentice, problem_target.state_dim)
-        if self.adaptive_actions and problem_target.discrete:
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
+        """Settings that need the tasks' descriptions (basis size, actuator)."""
+        check_features(type(self).__name__, "apprentice", self.apprentice, target.state_dim)
+        if self.adaptive_actions and target.discrete:
             raise ValueError(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
 
     def features(self, target: TaskDescription) -> Features:
@@ -249,6 +255,17 @@ class TATL:
             adaptive_actions=adaptive, samples_used=used,
         )
         return DiscreteTATLPolicy(**common) if target.discrete else TATLPolicy(**common)
+
+
+@dataclasses.dataclass(frozen=True)
+class ProjectedSource:
+    """The mapped source policy pi*_S(chi_plus(s_T)) without adaptation: a reference, no target samples."""
+
+    name: str = "projected-source"
+    uses_samples = False  # evaluated once, whatever the budget
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        return problem.projected_source_policy()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -288,9 +305,9 @@ class TargetFQI:
     def linear_features(self) -> dict:
         return {"kind": "linear"} if self.features is None else self.features
 
-    def check(self, problem_target: TaskDescription) -> None:
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
         if self.regressor == "linear":
-            check_features(type(self).__name__, "features", self.linear_features, problem_target.state_dim)
+            check_features(type(self).__name__, "features", self.linear_features, target.state_dim)
 
     def regressor_spec(self) -> dict:
         spec: dict = {"kind": self.regressor, "features": self.linear_features}
@@ -325,6 +342,6 @@ class RL(TargetFQI):
 
 
 __all__ = [
-    "GreedyPolicy", "Model", "Policy", "RL", "TATL", "TargetFQI", "TransferMethod", "TransferProblem", "UMATL",
+    "GreedyPolicy", "Model", "Policy", "ProjectedSource", "RL", "TATL", "TargetFQI", "TransferMethod", "TransferProblem", "UMATL",
     "check_features",
 ]

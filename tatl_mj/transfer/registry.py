@@ -12,14 +12,30 @@ import dataclasses
 import functools
 from typing import Any, Callable
 
-from tatl_mj.transfer.method import RL, TATL, UMATL, TransferMethod
+from tatl_mj.transfer.horizon import HorizonTATL
+from tatl_mj.transfer.method import RL, TATL, UMATL, ProjectedSource, TransferMethod
+from tatl_mj.transfer.tabular import OneStepOracle, ReplanTATL
 
 METHODS: dict[str, Callable[..., TransferMethod]] = {
+    # The paper's rule (Algorithms 1 and 2) and its two baselines.
     "ta-tl": TATL,
     "uma-tl": UMATL,
     "rl": RL,
+    # Extensions, each named apart from the paper's rule, and the ablations that credit them.
+    "ta-tl-h": HorizonTATL,
+    "apprentice-upright": functools.partial(HorizonTATL, reference="zero"),
+    "ta-tl-h-oracle": functools.partial(HorizonTATL, model="oracle"),
+    "ta-tl-replan": ReplanTATL,
+    "replan-no-source": functools.partial(ReplanTATL, source_prior=False),
+    "ta-tl-replan-protocol": functools.partial(ReplanTATL, data="source-policy", prior_scope="unvisited"),
+    "ta-tl-oracle": OneStepOracle,
+    # References.
+    "projected-source": ProjectedSource,
 }
 """Built-in methods: name -> factory(**settings)."""
+
+SOURCE_FREE = ("rl", "apprentice-upright", "replan-no-source")
+"""Methods that never look at the source: the ablations a transfer win is measured against."""
 
 BASELINES = ("uma-tl", "rl")
 """The paper's comparison methods (reports compare every other method with them)."""
@@ -57,4 +73,4 @@ def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
     return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
 
 
-__all__ = ["BASELINES", "METHODS", "build", "settings_of"]
+__all__ = ["BASELINES", "METHODS", "SOURCE_FREE", "build", "settings_of"]

@@ -53,22 +53,18 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
-import dm_env
 import numpy as np
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction, TabularQ, q_iteration
+from tatl_mj.transfer.method import TransferProblem
+from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
-
-IndexPolicy = Callable[[np.ndarray], np.ndarray]
-"""(N, d) states -> (N,) action indices."""
 
 PRIOR_SCOPES = ("agreeing-cells", "unvisited")
 """Where a :class:`TabularApprentice` uses its fallback for unvisited pairs."""
-
-SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
-"""One batched source-simulator step: (N, dS) states, (N,) action indices -> (N, dS)."""
 
 
 # --- Cells and models -------------------------------------------------------------
@@ -438,62 +434,106 @@ class OneStepRule:
         return self.step(target_states).action
 
 
-# --- The paper's data protocol ----------------------------------------------------------
+# --- Methods -------------------------------------------------------------------------
 
-def policy_transitions(
-    env: dm_env.Environment,
-    policy: IndexPolicy,
-    n_starts: int,
-    action_values: np.ndarray,
-    max_episode_steps: int | None = None,
-) -> Transitions:
-    """Runs ``policy`` for one episode from each of ``n_starts`` resets of ``env``.
+def _target_cells(problem: TransferProblem) -> np.ndarray:
+    """The target's cells (its state set): from its description's known model where it has
+    one (only the list of cells is read), else the source's, mapped through chi."""
+    if problem.target.known_model is not None:
+        return problem.target.known_model()[3]
+    return np.rint(problem.mapping.chi(problem.source.known_model()[3].astype(np.float64))).astype(np.int64)
 
-    The paper's protocol for the apprentice's data ("100 randomly sampled
-    starting positions, execute pi*(S) in the target"): the start states are the
-    env's own resets (load it with a random start and its ``random`` seed), and
-    ``env.step(action_values[i])`` carries out index i. Episodes end at the task's
-    own end or after ``max_episode_steps``; ``absorbing`` marks ends with
-    discount 0 and ``last`` every episode's final transition.
+
+@dataclasses.dataclass(frozen=True)
+class ReplanTATL:
+    """``ta-tl-replan``: plan on the source MDP corrected by a tabular apprentice of the target.
+
+    Departs from Algorithm 1: the one-step rule, even with the exact target model,
+    scores about 2.4 of 10 on the windy grid (four unit moves cannot cancel the
+    wind, and tracking the projected next state loops), so instead of matching the
+    source's next state this replans: Q-iteration on the source's known model,
+    carried through the mapping, whose transitions are replaced by the apprentice's
+    wherever target data exist (``TabularApprentice``).
+
+    Settings: ``gamma`` of the planner; ``source_prior`` (False: the
+    ``replan-no-source`` ablation, unvisited pairs stay put with reward 0, so only
+    the apprentice plans); ``prior_scope`` (``PRIOR_SCOPES``); ``data``: ``"stream"``
+    (the shared random-policy samples, as every method) or ``"source-policy"`` (the
+    paper's protocol: the budget is spent running the projected source policy from
+    the target's random starts).
     """
-    if isinstance(n_starts, bool) or not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
-        raise ValueError(f"n_starts must be an integer >= 1, got {n_starts!r}")
-    if max_episode_steps is not None and (
-        isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer))
-        or max_episode_steps < 1
-    ):
-        raise ValueError(f"max_episode_steps must be None or an integer >= 1, got {max_episode_steps!r}")
-    values = np.asarray(action_values)
-    rows: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "next_states", "absorbing", "last")}
-    for _ in range(n_starts):
-        timestep = env.reset()
-        state = _state(timestep)
-        steps = 0
-        while True:
-            a = np.asarray(policy(state[None]))
-            if a.shape != (1,) or not np.issubdtype(a.dtype, np.integer) or not 0 <= a[0] < len(values):
-                raise ValueError(f"policy must return (1,) integer indices in 0..{len(values) - 1}, got {a!r}")
-            timestep = env.step(values[int(a[0])])
-            steps += 1
-            next_state = _state(timestep)
-            last = timestep.last() or steps == max_episode_steps
-            for key, v in (("states", state), ("actions", int(a[0])), ("rewards", timestep.reward),
-                           ("next_states", next_state), ("absorbing", timestep.last() and timestep.discount == 0.0),
-                           ("last", last)):
-                rows[key].append(v)
-            if last:
-                break
-            state = next_state
-    return Transitions(**{k: np.asarray(v) for k, v in rows.items()})
+
+    gamma: float = 0.95
+    source_prior: bool = True
+    prior_scope: str = "agreeing-cells"
+    data: str = "stream"
+    name: str = "ta-tl-replan"
+
+    DATA = ("stream", "source-policy")
+
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 <= self.gamma < 1:
+            raise ValueError(f"{owner}.gamma must be in [0, 1), got {self.gamma!r}")
+        if not isinstance(self.source_prior, bool):
+            raise ValueError(f"{owner}.source_prior must be true or false, got {self.source_prior!r}")
+        if self.prior_scope not in PRIOR_SCOPES:
+            raise ValueError(f"{owner}.prior_scope is {self.prior_scope!r}; valid choices: {list(PRIOR_SCOPES)}")
+        if self.data not in self.DATA:
+            raise ValueError(f"{owner}.data is {self.data!r}; valid choices: {list(self.DATA)}")
+
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
+        owner = type(self).__name__
+        if not target.discrete:
+            raise ValueError(f"{owner} plans over cells: the target must take action indices")
+        if source.known_model is None:
+            raise ValueError(f"{owner} plans on the source's known model; {source.domain}/{source.task} has none")
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> ReplanPolicy:
+        self.check(problem.source, problem.target)
+        cells = CellMap(_target_cells(problem))
+        n_actions = problem.target.n_actions
+        if self.source_prior:
+            next_state, reward, absorbing, source_cells = problem.source.known_model()
+            fallback = mapped_model(TabularModel(next_state, reward, absorbing), CellMap(source_cells), cells,
+                                    problem.mapping)
+        else:
+            fallback = uninformed_model(cells.n_cells, n_actions)
+        samples = target_samples
+        if self.data == "source-policy":
+            if problem.policy_samples is None:
+                raise ValueError(f"{type(self).__name__}(data='source-policy') needs the problem's policy_samples")
+            samples = problem.policy_samples(problem.projected_source_policy(), len(target_samples))
+        apprentice = fit_tabular_apprentice(samples, cells, fallback, self.prior_scope)
+        return replan(apprentice, cells, self.gamma, samples_used=len(samples))
 
 
-def _state(timestep: dm_env.TimeStep) -> np.ndarray:
-    obs = timestep.observation
-    return np.asarray(obs["state"] if isinstance(obs, dict) else obs, dtype=np.float64)
+@dataclasses.dataclass(frozen=True)
+class OneStepOracle:
+    """``ta-tl-oracle``: Algorithm 1's one-step rule with the exact target model as its apprentice.
+
+    An ablation (it reads the target's known model, no samples): what the paper's
+    rule scores when the apprentice is perfect, so the reader sees how much of a
+    failure is the rule's and how much the apprentice's.
+    """
+
+    name: str = "ta-tl-oracle"
+    uses_samples = False
+
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
+        if target.known_model is None:
+            raise ValueError(f"{type(self).__name__} needs the target's known model; "
+                             f"{target.domain}/{target.task} has none")
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> OneStepRule:
+        self.check(problem.source, problem.target)
+        next_state, reward, absorbing, cells = problem.target.known_model()
+        return OneStepRule(problem.source_q, problem.mapping, problem.source_step,
+                           TabularModel(next_state, reward, absorbing), CellMap(cells))
 
 
 __all__ = [
     "PRIOR_SCOPES", "CellMap", "OneStepDecision", "OneStepRule", "ReplanPolicy", "ReplanStep", "TabularApprentice",
-    "TabularModel", "fit_tabular_apprentice", "mapped_model", "policy_transitions", "replan",
+    "OneStepOracle", "ReplanTATL", "TabularModel", "fit_tabular_apprentice", "mapped_model", "replan",
     "uninformed_model",
 ]
