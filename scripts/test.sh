@@ -1,6 +1,10 @@
 #!/usr/bin/env bash
-# Sets up (scripts/setup.sh) and runs the whole test suite.
+# Sets up (scripts/setup.sh), then lint (ruff), format check, types (mypy) and
+# the whole test suite; any finding fails the run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+.venv/bin/ruff check tatl_mj tests
+.venv/bin/ruff format --check tatl_mj tests
+.venv/bin/mypy
 exec .venv/bin/python -m pytest "$@"

@@ -56,7 +56,7 @@ def _problem(target_discrete=False, **overrides):
 
 
 def test_registry_and_protocol():
-    assert set(METHODS) == {"ta-tl", "uma-tl", "rl"}
+    assert {"ta-tl", "uma-tl", "rl"} <= set(METHODS)
     for name in METHODS:
         method = build(name)
         assert isinstance(method, TransferMethod) and method.name == name
