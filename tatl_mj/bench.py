@@ -9,7 +9,11 @@ car and bicycle:
 - ``sampler``: :func:`tatl_mj.sampling.collect`, whole random episodes in
   lockstep on ``--threads`` MuJoCo threads, task logic included;
 - ``rollout``: raw ``mujoco.rollout`` of the bare model, open loop, no task
-  logic and no episode ends: the physical limit here.
+  logic and no episode ends: the physical limit here;
+- ``gymnasium``: the peer a user would otherwise pick, Gymnasium's own Python
+  loop (``gymnasium.make``, random actions, reset at episode ends) for
+  CartPole-v1, Pendulum-v1 and MountainCar-v0; skipped with a note when
+  gymnasium is not installed.
 
 Then Fitted Q-Iteration on 100 000 cart-pole transitions, 640x480 frames per
 second from the tracking camera (under the current ``MUJOCO_GL``), and the peak
@@ -31,6 +35,7 @@ from typing import Any
 import numpy as np
 
 DOMAINS = {"cartpole": "balance", "pendulum": "swingup", "mountain_car": "climb", "bicycle": "balance"}
+GYMNASIUM = {"cartpole": "CartPole-v1", "pendulum": "Pendulum-v1", "mountain_car": "MountainCar-v0"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -173,6 +178,39 @@ def time_rollout(domain: str, task: str, seconds: float, threads: int, seed: int
     return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed, "substeps": n_sub}
 
 
+def time_gymnasium(env_id: str, seconds: float, seed: int = 0) -> dict[str, Any]:
+    """Gymnasium's own loop: ``env.step`` with random actions, resetting at episode ends.
+
+    Returns ``{"skipped": why}`` when gymnasium is not installed.
+    """
+    try:
+        import gymnasium
+    except ImportError as error:
+        return {"skipped": f"gymnasium is not installed ({error})"}
+    env = gymnasium.make(env_id)
+    space = env.action_space
+    rng = np.random.default_rng(seed)
+
+    def draw() -> Any:
+        if isinstance(space, gymnasium.spaces.Discrete):
+            return rng.integers(space.n, size=100)
+        return rng.uniform(space.low, space.high, size=(100, *space.shape)).astype(space.dtype)
+
+    env.reset(seed=seed)
+    steps, start = 0, time.perf_counter()
+    while True:
+        for action in draw():
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        steps += 100
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            env.close()
+            return {"env_id": env_id, "steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed,
+                    "gymnasium": gymnasium.__version__}
+
+
 # --- Learning, rendering, memory ----------------------------------------------------------
 
 def time_fqi(n: int, threads: int) -> dict[str, Any]:
@@ -255,6 +293,12 @@ def run(args: argparse.Namespace) -> int:
             "sampler": time_sampler(domain, task, args.seconds, args.threads),
             "rollout": time_rollout(domain, task, args.seconds / 2, args.threads),
         }
+        if domain in GYMNASIUM:
+            peer = time_gymnasium(GYMNASIUM[domain], args.seconds / 2)
+            if "skipped" in peer:
+                emit({"kind": "gymnasium", "domain": domain, **peer})
+            else:
+                figures["gymnasium"] = peer
         for path, record in figures.items():
             emit({"kind": "steps", "domain": domain, "task": task, "path": path, **record})
         per_domain[domain] = {f"{p}_steps_per_s": r["steps_per_s"] for p, r in figures.items()}
@@ -268,6 +312,10 @@ def run(args: argparse.Namespace) -> int:
         per_domain[domain]["rollout_vs_dm_control"] = (
             figures["rollout"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
         )
+        if "gymnasium" in figures:
+            per_domain[domain]["sampler_vs_gymnasium"] = (
+                figures["sampler"]["steps_per_s"] / figures["gymnasium"]["steps_per_s"]
+            )
     extra: dict[str, Any] = {}
     # Memory first, so that the process's peak RSS is not FQI's or the renderer's.
     if args.memory_transitions:
@@ -294,10 +342,12 @@ def _print_record(record: dict[str, Any]) -> None:
     kind = record["kind"]
     if kind == "steps":
         real_time = f", {record['real_time_factor']:.0f}x real time" if "real_time_factor" in record else ""
+        peer = f", {record['env_id']}" if "env_id" in record else ""
         print(f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
-              f"({record['steps']} steps in {record['seconds']:.2f} s{real_time})")
+              f"({record['steps']} steps in {record['seconds']:.2f} s{real_time}{peer})")
     elif "skipped" in record:
-        print(f"{kind}: skipped ({record['skipped']})")
+        where = f" for {record['domain']}" if "domain" in record else ""
+        print(f"{kind}{where}: skipped ({record['skipped']})")
     elif kind == "fqi":
         print(f"FQI: {record['transitions']} transitions, {record['features']} RBF features, "
               f"{record['iterations']} iterations in {record['seconds']:.2f} s")
@@ -309,6 +359,8 @@ def _print_record(record: dict[str, Any]) -> None:
               f"process max RSS so far {record['max_rss_mb']:.0f} MB")
     elif kind == "summary":
         for domain, figures in record["domains"].items():
+            peer = (f", {figures['sampler_vs_gymnasium']:.2f}x Gymnasium's loop"
+                    if "sampler_vs_gymnasium" in figures else "")
             print(f"{domain:>13}: sampler {figures['sampler_vs_dm_control']:.1f}x dm_control, "
-                  f"{figures['sampler_vs_rollout']:.2f}x raw rollout "
+                  f"{figures['sampler_vs_rollout']:.2f}x raw rollout{peer} "
                   f"(raw rollout itself: {figures['rollout_vs_dm_control']:.1f}x dm_control)")

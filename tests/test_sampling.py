@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 import tracemalloc
 
 import numpy as np
@@ -241,13 +243,55 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     assert bench.run(args) == 0
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     paths = {r["path"] for r in records if r["kind"] == "steps"}
-    assert paths == {"dm_control", "sampler", "rollout"}
+    has_gymnasium = importlib.util.find_spec("gymnasium") is not None
+    assert paths == {"dm_control", "sampler", "rollout"} | ({"gymnasium"} if has_gymnasium else set())
     summary = records[-1]
     assert summary["kind"] == "summary"
     for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s", "rollout_vs_dm_control"):
         assert summary[key] > 0
+    if has_gymnasium:
+        peer = next(r for r in records if r.get("path") == "gymnasium")
+        assert peer["env_id"] == "CartPole-v1" and peer["steps"] >= 100
+        assert summary["sampler_vs_gymnasium"] == pytest.approx(
+            summary["sampler_steps_per_s"] / peer["steps_per_s"])
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
+
+
+def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch):
+    import argparse
+
+    from tatl_mj import bench
+
+    monkeypatch.setitem(sys.modules, "gymnasium", None)  # import gymnasium now raises ImportError
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args([
+        "--domains", "pendulum", "--seconds", "0.05", "--memory-transitions", "0",
+        "--fqi-transitions", "0", "--render-frames", "0",
+    ])
+    assert bench.run(args) == 0
+    out = capsys.readouterr().out
+    assert "gymnasium for pendulum: skipped (gymnasium is not installed" in out
+    assert "pendulum    sampler" in out and "Gymnasium's loop" not in out
+
+
+def test_expected_lengths_count_running_episodes_as_censored():
+    """Kaplan-Meier by hand: one episode ended at 90, seven still run at age 90. S = 7/8 on
+    [90, 180) (survivors assumed to go on to twice the longest seen), so a new episode is
+    expected to last 90 + 90 * 7/8 = 168.75 steps, and each survivor 90 more; the mean of
+    the ended lengths alone would say 90."""
+    expected, remaining = sampling._expected_remaining(np.array([90]), np.full(7, 90), limit=100_000.0)
+    assert expected == pytest.approx(168.75)
+    np.testing.assert_allclose(remaining, 90.0)
+    # Running ages come back in their own order; the limit caps the tail.
+    expected, remaining = sampling._expected_remaining(np.array([10, 30]), np.array([20, 0]), limit=40.0)
+    # S: 1 on [0, 10), 2/3 on [10, 30) (at risk at 10: ended 10, 30 and age 20), 0 from 30 on
+    # (at risk at 30: the ended 30 alone); the tail [30, 40) adds nothing.
+    assert expected == pytest.approx(10 + 20 * 2 / 3)
+    np.testing.assert_allclose(remaining, [(20 * 2 / 3 - 10 * 2 / 3) / (2 / 3), 10 + 20 * 2 / 3])
+    # Before any episode ends: the limit.
+    assert sampling._expected_remaining(np.array([], np.int64), np.array([3]), 50.0)[0] == 50.0
 
 
 def test_transitions_save_and_load_round_trip(tmp_path):
