@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 import typing
 from pathlib import Path
@@ -20,6 +21,8 @@ SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
 MAPPING_KINDS = ("identity", "manifold_alignment", "affine")
 REGRESSORS = ("linear", "extra_trees")
+# [robustness] The name becomes a folder under --out: no separators, no "..", no hidden names.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}")
 
 
 class SpecError(ValueError):
@@ -190,6 +193,8 @@ def _check(spec: ExperimentSpec) -> None:
     from tatl_mj import suite  # imports mujoco: only once the spec parsed
 
     p = spec.path
+    if not NAME_PATTERN.fullmatch(spec.name):  # [robustness]
+        _fail(p, "name", "1-100 of A-Z a-z 0-9 _ . - not starting with '.' or '-' (it names a folder)", spec.name)
     for side_name in ("source", "target"):
         side: Side = getattr(spec, side_name)
         if side.domain not in suite.DOMAINS:
@@ -265,9 +270,15 @@ def load_spec(path: str | Path) -> ExperimentSpec:
     """Reads and validates one experiment spec (TOML)."""
     path = Path(path)
     try:
-        table = tomllib.loads(path.read_text())
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError(f"{path}: no such spec file") from None
+    except IsADirectoryError:  # [robustness]
+        raise SpecError(f"{path}: is a directory, not a spec file") from None
+    except UnicodeDecodeError as error:  # [robustness]
+        raise SpecError(f"{path}: not a text (UTF-8) file: {error.reason} at byte {error.start}") from None
+    except OSError as error:  # [robustness]
+        raise SpecError(f"{path}: cannot read: {error.strerror or error}") from None
     except tomllib.TOMLDecodeError as error:
         raise SpecError(f"{path}: not valid TOML: {error}") from None
     return parse_spec(table, str(path))
