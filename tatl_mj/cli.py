@@ -108,7 +108,8 @@ def _run(args: argparse.Namespace) -> int:
         )
     except Interrupted as stop:
         name = signal.Signals(stop.signum).name
-        print(f"tatl run: stopped by {name}; finished units are kept in {args.out}, "
+        # Leading newline: the progress bar's line is left unfinished.
+        print(f"\ntatl run: stopped by {name}; finished units are kept in {args.out}, "
               f"run the same command to resume", file=sys.stderr)
         return 128 + stop.signum
     except lock.LockHeld as error:
