@@ -7,8 +7,10 @@ dm_control, so every subcommand works on a headless machine.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
+from typing import Any
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -36,9 +38,45 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run(args: argparse.Namespace) -> int:
-    from tatl_mj.experiments import runner, spec as spec_mod
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived during a run (a BaseException, as KeyboardInterrupt is)."""
 
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    from tatl_mj.experiments import workers
+
+    # Stop the workers first: a pool's shutdown would otherwise wait for every running unit.
+    workers.stop_children()
+    raise Interrupted(signum)
+
+
+def _check_out(out: str) -> str | None:
+    """Why ``--out`` cannot hold a run, or None; touches nothing."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        return f"--out {out}: exists and is not a directory"
+    existing = next((p for p in [path, *path.parents] if p.exists()), Path("."))
+    if not existing.is_dir():
+        return f"--out {out}: {existing} is not a directory"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"--out {out}: {existing} is not writable"
+    return None
+
+
+def _run(args: argparse.Namespace) -> int:
+    import signal
+
+    from tatl_mj.experiments import lock, records, runner, spec as spec_mod
+
+    resolved = [Path(p).resolve() for p in args.specs]
+    twice = sorted({str(p) for p in args.specs if resolved.count(Path(p).resolve()) > 1})
+    if twice:
+        print(f"tatl run: spec given more than once: {', '.join(twice)}", file=sys.stderr)
+        return 2
     try:
         specs = [spec_mod.load_spec(p) for p in args.specs]
         for s in specs:
@@ -46,16 +84,47 @@ def _run(args: argparse.Namespace) -> int:
     except spec_mod.SpecError as error:
         print(f"tatl run: {error}", file=sys.stderr)
         return 2
+    names = [s.name for s in specs]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        print(f"tatl run: experiment name {clash[0]!r} is used by more than one spec: "
+              f"{', '.join(s.path for s in specs if s.name == clash[0])}", file=sys.stderr)
+        return 2
+    problem = _check_out(args.out)
+    if problem:
+        print(f"tatl run: {problem}", file=sys.stderr)
+        return 2
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     try:
         methods = _methods(args.methods)
     except ValueError as error:
         print(f"tatl run: --methods: {error}", file=sys.stderr)
         return 2
-    summary = runner.run(
-        specs, args.preset, seeds, args.out, workers=args.workers, executor=args.executor, address=args.address,
-        methods=methods,
-    )
+    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        summary = runner.run(
+            specs, args.preset, seeds, args.out, workers=args.workers, executor=args.executor,
+            address=args.address, methods=methods,
+        )
+    except Interrupted as stop:
+        name = signal.Signals(stop.signum).name
+        # Leading newline: the progress bar's line is left unfinished.
+        print(f"\ntatl run: stopped by {name}; finished units are kept in {args.out}, "
+              f"run the same command to resume", file=sys.stderr)
+        return 128 + stop.signum
+    except lock.LockHeld as error:
+        print(f"tatl run: {error}", file=sys.stderr)
+        return 2
+    except records.RecordError as error:
+        print(f"tatl run: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        where = error.filename or args.out
+        print(f"tatl run: cannot write {where}: {error.strerror or error}", file=sys.stderr)
+        return 2
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     failures = summary.get("failures", [])
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     for line in failures:
@@ -106,8 +175,15 @@ def _plot(args: argparse.Namespace) -> int:
 
     try:
         paths = plot.plot(args.dir)
-    except FileNotFoundError as error:
+    except (FileNotFoundError, ValueError) as error:  # records.RecordError is a ValueError
         print(f"tatl plot: {error}", file=sys.stderr)
+        return 2
+    except (KeyError, TypeError, AttributeError) as error:
+        print(f"tatl plot: {Path(args.dir) / 'summary.json'} is malformed ({type(error).__name__}: {error}); "
+              f"rerun `tatl run` to rebuild it", file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f"tatl plot: cannot write {error.filename or args.dir}: {error.strerror or error}", file=sys.stderr)
         return 2
     for path in paths:
         print(f"wrote {path}")
@@ -136,6 +212,26 @@ def _bench(args: argparse.Namespace) -> int:
     return bench.run(args)
 
 
+def _int_at_least(low: int) -> Any:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number >= {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"  # what argparse names in its error
+    return parse
+
+
+def _non_empty(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must be a non-empty path")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tatl", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -148,10 +244,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run transfer experiments (resumable)")
     p.add_argument("specs", nargs="+", help="experiment specs, e.g. tasks/*.toml")
     p.add_argument("--preset", default="smoke", help="named budget preset in the specs (default: smoke)")
-    p.add_argument("--seeds", type=int, default=2, help="number of seeds (default: 2)")
-    p.add_argument("--first-seed", type=int, default=0)
-    p.add_argument("--out", required=True, help="output folder; rerunning resumes it")
-    p.add_argument("--workers", type=int, default=2, help="parallel work units (default: 2)")
+    p.add_argument("--seeds", type=_int_at_least(1), default=2, help="number of seeds, >= 1 (default: 2)")
+    p.add_argument("--first-seed", type=_int_at_least(0), default=0)
+    p.add_argument("--out", type=_non_empty, required=True, help="output folder; rerunning resumes it")
+    p.add_argument("--workers", type=_int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     p.add_argument("--methods", default=None,
@@ -191,8 +287,6 @@ RENDERING_COMMANDS = ("render", "bench")
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    import os
-
     from tatl_mj import gl
 
     if args.command in RENDERING_COMMANDS:

@@ -12,6 +12,7 @@ reported (traceback in DIR/failures/) and does not take the others down.
 from __future__ import annotations
 
 import dataclasses
+import os
 import pickle
 import platform
 import sys
@@ -24,7 +25,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
-from tatl_mj.experiments import pipeline, summary as summary_mod
+from tatl_mj.experiments import lock, pipeline, summary as summary_mod, workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, spec_to_dict
 from tatl_mj.transfer import registry
@@ -89,7 +90,11 @@ def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
     import multiprocessing
 
     # spawn: MuJoCo/GL state must not be forked into workers.
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    # [robustness] workers die with this process, however it dies.
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+        initializer=workers_mod.die_with_parent, initargs=(os.getpid(),),
+    ) as pool:
         futures = {pool.submit(work, *args): unit for unit, args in jobs}
         pending = set(futures)
         while pending:
@@ -208,9 +213,7 @@ class _Recorder:
             self.failures.append(f"{unit}: {last} (see {path})")
             self.bar.write(f"FAILED {unit}: {last}")
         else:
-            if result.get("blob") is not None:
-                write_atomic(run_dir.blob_path(unit.experiment, unit.seed), result["blob"])
-            write_json(run_dir.record_path(unit.experiment, unit.seed, unit.name), result["record"])
+            run_dir.write_unit(unit.experiment, unit.seed, unit.name, result["record"], result.get("blob"))
             self.done.add(unit)
         self.bar.update(1)
 
@@ -243,12 +246,23 @@ def run(
     for spec in specs:
         spec.preset(preset)  # fail before any work on an unknown preset
     seeds = list(seeds)
+    if not seeds or not specs or (methods is not None and not list(methods)):  # never touch a folder for nothing
+        raise ValueError(f"nothing to run: {len(specs)} specs, {len(seeds)} seeds, methods {methods!r}")
     all_units, custom = _plan(specs, preset, seeds, methods)
     run_dir = RunDirectory(out)
+    with lock.hold(run_dir.root):  # [robustness] one run per --out; raises lock.LockHeld
+        return _run_locked(specs, preset, seeds, run_dir, workers, executor, all_units, custom, progress, dispatch)
+
+
+def _run_locked(
+    specs: list[ExperimentSpec], preset: str, seeds: list[int], run_dir: RunDirectory, workers: int,
+    executor: str, all_units: list[Unit], custom: dict[str, Any], progress: bool,
+    dispatch: Callable[[list[Job]], Iterator[tuple[Unit, dict]]],
+) -> dict:
     _check_manifest(run_dir, preset, specs)
     start = time.perf_counter()
     by_name = {s.name: s for s in specs}
-    done = {u for u in all_units if run_dir.record_path(u.experiment, u.seed, u.name).exists()}
+    done = {u for u in all_units if run_dir.is_done(u.experiment, u.seed, u.name)}  # validated on read
     bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
     record = _Recorder(run_dir, done, bar)
 
@@ -263,7 +277,7 @@ def run(
         if Unit(unit.experiment, unit.seed, SOURCE_UNIT) not in done:
             record.skip(unit, "its source unit failed")
             continue
-        blob = run_dir.blob_path(unit.experiment, unit.seed).read_bytes()
+        blob = run_dir.read_blob(unit.experiment, unit.seed)
         jobs.append((unit, (by_name[unit.experiment], preset, unit, blob, custom.get(unit.name))))
     for unit, result in dispatch(jobs):
         record(unit, result)

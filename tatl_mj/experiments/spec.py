@@ -25,6 +25,8 @@ SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
 MAPPING_KINDS = ("identity", "manifold_alignment", "transition_alignment", "affine")
 ALIGNMENT_DATA = ("episodes", "uniform")
+# The name becomes a folder under --out: no separators, no "..", no hidden names.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}")
 
 
 class SpecError(ValueError):
@@ -200,9 +202,6 @@ def _choice(path: str, key: str, value: str, valid: tuple[str, ...]) -> None:
         raise SpecError(f"{path}: key '{key}' is {value!r}; valid choices: {list(valid)}")
 
 
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
-
-
 def _describe(spec: ExperimentSpec, side_name: str) -> Any:
     from tatl_mj import suite  # imports mujoco: only once the spec parsed
 
@@ -321,7 +320,7 @@ def _check(spec: ExperimentSpec) -> None:
     """Value checks that types alone cannot express, through the factories the workers use."""
     p = spec.path
     if not NAME_PATTERN.fullmatch(spec.name):
-        _fail(p, "name", "letters, digits, '_', '.' and '-' (not starting with '.' or '-')", spec.name)
+        _fail(p, "name", "1-100 of A-Z a-z 0-9 _ . - not starting with '.' or '-' (it names a folder)", spec.name)
     source, target = _describe(spec, "source"), _describe(spec, "target")
     _check_side(spec, "source", source)
     _check_side(spec, "target", target)
@@ -377,9 +376,15 @@ def load_spec(path: str | Path) -> ExperimentSpec:
     """Reads and validates one experiment spec (TOML)."""
     path = Path(path)
     try:
-        table = tomllib.loads(path.read_text())
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError(f"{path}: no such spec file") from None
+    except IsADirectoryError:  # [robustness]
+        raise SpecError(f"{path}: is a directory, not a spec file") from None
+    except UnicodeDecodeError as error:  # [robustness]
+        raise SpecError(f"{path}: not a text (UTF-8) file: {error.reason} at byte {error.start}") from None
+    except OSError as error:  # [robustness]
+        raise SpecError(f"{path}: cannot read: {error.strerror or error}") from None
     except tomllib.TOMLDecodeError as error:
         raise SpecError(f"{path}: not valid TOML: {error}") from None
     return parse_spec(table, str(path))

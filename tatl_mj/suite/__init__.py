@@ -106,6 +106,8 @@ def action_set(domain: str) -> np.ndarray:
 def discrete_action(domain: str, index: int) -> np.ndarray:
     """The actuator value of discrete action ``index`` (e.g. 0 -> -20 N for cart-pole)."""
     actions = action_set(domain)
+    if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)):
+        raise ValueError(f"action index must be a whole number (0..{len(actions) - 1} for {domain}), got {index!r}")
     if not 0 <= int(index) < len(actions):
         raise ValueError(f"action index {index} out of range for {domain}; valid: 0..{len(actions) - 1}")
     return actions[int(index)]

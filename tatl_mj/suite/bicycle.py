@@ -383,7 +383,7 @@ class Task(common.StateTask):
     """Keep the bicycle within 12 degrees of upright at a constant forward speed."""
 
     def __init__(self, speed: float = DEFAULT_SPEED, cg_noise: float = DEFAULT_CG_NOISE, random: Any = None):
-        speed, cg_noise = float(speed), float(cg_noise)
+        speed, cg_noise = common.real(speed, "bicycle speed"), common.real(cg_noise, "bicycle cg_noise")
         if not (math.isfinite(speed) and 0.0 < speed <= 20.0):
             raise ValueError(f"speed must be in (0, 20] m/s, got {speed!r}")
         if not (math.isfinite(cg_noise) and 0.0 <= cg_noise <= MAX_CG_NOISE):

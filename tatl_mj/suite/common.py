@@ -61,18 +61,34 @@ def nonnegative(default: float, doc: str = "") -> Any:
     return dataclasses.field(default=default, metadata={"bound": "nonnegative", "doc": doc})
 
 
+def is_real(value: Any) -> bool:
+    """A real number: int, float or a numpy scalar of either, not a bool."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, float, np.integer, np.floating))
+
+
+def real(value: Any, name: str) -> float:
+    """``value`` as a float; raises ValueError naming ``name`` unless it is a real number (not "1", None, True)."""
+    if not is_real(value):
+        raise ValueError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
+    return float(value)
+
+
 def check_params(params: Any) -> None:
     """Raises ValueError naming the first field that is not physical.
 
-    Every float field must be finite; fields made with :func:`positive` or
-    :func:`nonnegative` must also respect their bound. Call it from
+    Every field declared ``float`` (or made with :func:`positive` /
+    :func:`nonnegative`) must be a finite real number, not a string or a bool;
+    bounded fields must also respect their bound. Call it from
     ``__post_init__`` of a frozen parameter dataclass.
     """
     cls = type(params).__name__
     for field in dataclasses.fields(params):
         value = getattr(params, field.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        numeric = field.type in ("float", float) or "bound" in field.metadata
+        if not numeric:
             continue
+        if not is_real(value):
+            raise ValueError(f"{cls}.{field.name} must be a number, got {value!r} ({type(value).__name__})")
         if not math.isfinite(value):
             raise ValueError(f"{cls}.{field.name} must be a finite number, got {value!r}")
         bound = field.metadata.get("bound")
@@ -122,6 +138,33 @@ class StatePhysics(engine.Physics):
         with self.reset_context():
             self.data.qpos[:] = qpos[0]
             self.data.qvel[:] = qvel[0]
+
+
+def check_action(action: Any, spec: Any) -> np.ndarray:
+    """An action checked against its ``action_spec()``; returns it as float64 of the spec's shape.
+
+    Policy: the shape must be the spec's (a plain number is also taken for a
+    spec of shape (1,)), and every value finite; anything else raises
+    ValueError. Finite values outside the spec's bounds are not an error:
+    MuJoCo clips them to the actuator's ``ctrlrange``, as in dm_control.
+    """
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be numbers of shape {spec.shape}, got {action!r}") from None
+    if a.shape != spec.shape and not (a.ndim == 0 and spec.shape == (1,)):
+        raise ValueError(f"action must have shape {spec.shape} (the action_spec), got shape {a.shape}: {action!r}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {action!r}")
+    return a.reshape(spec.shape)
+
+
+def check_time_limit(time_limit: Any) -> float:
+    """A task's time limit in seconds: a number > 0 (``inf`` for none); raises ValueError otherwise."""
+    value = real(time_limit, "time_limit")
+    if math.isnan(value) or value <= 0:
+        raise ValueError(f"time_limit must be a number of seconds > 0 (or inf), got {time_limit!r}")
+    return value
 
 
 def as_state(state: Any, size: int, domain: str) -> np.ndarray:
@@ -179,8 +222,11 @@ class StateTask(base.Task):
         return np.asarray(action_values, dtype=np.float64)
 
     def before_step(self, action: Any, physics: StatePhysics) -> None:
-        action = np.asarray(action, dtype=np.float64).reshape(1, -1)
-        physics.set_control(self.controls(action, self.random)[0])
+        spec = getattr(self, "_checked_action_spec", None)
+        if spec is None:  # the model's actuators never change, so build the spec once
+            spec = self._checked_action_spec = self.action_spec(physics)
+        action = check_action(action, spec)
+        physics.set_control(self.controls(action.reshape(1, -1), self.random)[0])
 
     def get_reward(self, physics: StatePhysics) -> float:
         return float(self.batch_reward(physics.state_vector()[None])[0])
@@ -199,6 +245,8 @@ class Environment(control.Environment):
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
+        if "time_limit" in kwargs:  # every factory passes it by keyword
+            kwargs["time_limit"] = check_time_limit(kwargs["time_limit"])
         super().__init__(*args, **kwargs)
         self.diverged: str | None = None
         self._last_observation: Any = None

@@ -196,6 +196,9 @@ class GridWorld(dm_env.Environment):
     ) -> None:
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, np.integer)) or time_limit < 1:
             raise ValueError(f"gridworld time_limit must be a whole number of steps >= 1, got {time_limit!r}")
+        for name, flag in (("random_start", random_start), ("stochastic_wind", stochastic_wind)):
+            if not isinstance(flag, (bool, np.bool_)):
+                raise ValueError(f"gridworld {name} must be true or false, got {flag!r}")
         if stochastic_wind and not windy:
             raise ValueError("gridworld stochastic_wind needs windy=True (the plain task has no wind)")
         self.windy = bool(windy)

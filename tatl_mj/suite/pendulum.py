@@ -123,7 +123,9 @@ class Physics(common.StatePhysics):
 
         Writes the mass properties and the geometry, then refreshes derived model
         fields with ``mj_setConst`` on a scratch MjData, so qpos, qvel and the rest
-        of the live state are untouched; no recompiling.
+        of the live state are untouched; no recompiling. Ends with ``forward()``,
+        so positions derived from the state (what a render shows) match the new
+        geometry at once.
         """
         for name, value in (("length", length), ("mass", mass)):
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
@@ -147,6 +149,7 @@ class Physics(common.StatePhysics):
             scratch = mujoco.MjData(self.model.ptr)
             self._scratch_data = scratch
         mujoco.mj_setConst(self.model.ptr, scratch)
+        self.forward()
 
 
 def make_physics(params: PendulumParams | None = None, flipped: bool = False) -> Physics:
