@@ -42,17 +42,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``tatl bench``."""
     parser.add_argument("--json", action="store_true", help="one JSON object per line, the summary last")
     parser.add_argument(
-        "--domains", default=",".join(DOMAINS),
+        "--domains",
+        default=",".join(DOMAINS),
         help=f"comma-separated subset of {', '.join(DOMAINS)} (default: all)",
     )
     parser.add_argument("--threads", type=int, default=2, help="MuJoCo threads for sampler and rollout (default 2)")
     parser.add_argument("--seconds", type=float, default=2.0, help="target length of each timing (default 2 s)")
     parser.add_argument(
-        "--memory-transitions", type=int, default=1_000_000,
+        "--memory-transitions",
+        type=int,
+        default=1_000_000,
         help="cart-pole transitions collected for the memory figure (default 10^6; 0 skips it)",
     )
     parser.add_argument(
-        "--fqi-transitions", type=int, default=100_000,
+        "--fqi-transitions",
+        type=int,
+        default=100_000,
         help="cart-pole transitions FQI is fitted on (default 100 000; 0 skips it)",
     )
     parser.add_argument("--render-frames", type=int, default=60, help="frames for the render figure (0 skips it)")
@@ -89,15 +94,20 @@ def machine() -> dict[str, Any]:
         pass
     usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
-        "cpu": cpu, "cores": os.cpu_count(), "usable_cores": usable,
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "usable_cores": usable,
         "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
-        "python": platform.python_version(), "mujoco": mujoco.__version__,
-        "dm_control": metadata.version("dm-control"), "numpy": np.__version__,
+        "python": platform.python_version(),
+        "mujoco": mujoco.__version__,
+        "dm_control": metadata.version("dm-control"),
+        "numpy": np.__version__,
         "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
     }
 
 
 # --- Stepping -------------------------------------------------------------------------
+
 
 def time_dm_control(domain: str, task: str, seconds: float, seed: int = 0) -> dict[str, Any]:
     """Random actions through ``env.step``, resetting at episode ends."""
@@ -116,7 +126,9 @@ def time_dm_control(domain: str, task: str, seconds: float, seed: int = 0) -> di
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
             return {
-                "steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed,
+                "steps": steps,
+                "seconds": elapsed,
+                "steps_per_s": steps / elapsed,
                 # simulated seconds per wall-clock second
                 "real_time_factor": steps * env.control_timestep() / elapsed,
             }
@@ -135,8 +147,11 @@ def time_sampler(domain: str, task: str, seconds: float, threads: int, seed: int
     tr = sampling.collect(domain, task, n, seed=seed + 1, n_threads=threads)
     elapsed = time.perf_counter() - start
     return {
-        "steps": n, "seconds": elapsed, "steps_per_s": n / elapsed,
-        "episodes": int(tr.last.sum()), "batched": sampling.is_batched(domain, task),
+        "steps": n,
+        "seconds": elapsed,
+        "steps_per_s": n / elapsed,
+        "episodes": int(tr.last.sum()),
+        "batched": sampling.is_batched(domain, task),
     }
 
 
@@ -163,6 +178,7 @@ def time_rollout(domain: str, task: str, seconds: float, threads: int, seed: int
     controls = env.task.controls(actions, env.task.random)
     datas = [mujoco.MjData(model) for _ in range(max(threads, 1))]
     with mujoco.rollout.Rollout(nthread=threads) as pool:
+
         def run(n_control: int) -> float:
             picks = rng.integers(len(actions), size=(n_batch, n_control))
             ctrl = np.repeat(controls[picks], n_sub, axis=1)
@@ -207,24 +223,32 @@ def time_gymnasium(env_id: str, seconds: float, seed: int = 0) -> dict[str, Any]
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
             env.close()
-            return {"env_id": env_id, "steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed,
-                    "gymnasium": gymnasium.__version__}
+            return {
+                "env_id": env_id,
+                "steps": steps,
+                "seconds": elapsed,
+                "steps_per_s": steps / elapsed,
+                "gymnasium": gymnasium.__version__,
+            }
 
 
 # --- Learning, rendering, memory ----------------------------------------------------------
+
 
 def time_fqi(n: int, threads: int) -> dict[str, Any]:
     """Linear-RBF FQI (20 iterations) on ``n`` random cart-pole transitions."""
     from tatl_mj import sampling
 
     try:
-        from tatl_mj.transfer import fqi, features
+        from tatl_mj.transfer import features, fqi
     except ImportError as error:
         return {"skipped": f"tatl_mj.transfer.fqi is not available: {error}"}
     tr = sampling.collect("cartpole", "balance", n, seed=0, n_threads=threads)
     basis = features.RBF.grid(
-        low=[-2.4, -3.0, -0.21, -3.5], high=[2.4, 3.0, 0.21, 3.5],
-        n_centers=[3, 3, 5, 5], sigma=[1.2, 1.5, 0.05, 0.9],
+        low=[-2.4, -3.0, -0.21, -3.5],
+        high=[2.4, 3.0, 0.21, 3.5],
+        n_centers=[3, 3, 5, 5],
+        sigma=[1.2, 1.5, 0.05, 0.9],
     )
     start = time.perf_counter()
     fqi.fitted_q_iteration(tr, 3, fqi.LinearRegressor(basis), gamma=0.99, iterations=20)
@@ -266,12 +290,16 @@ def measure_memory(n: int, threads: int) -> dict[str, Any]:
     tracemalloc.stop()
     stored = sum(a.nbytes for a in (tr.states, tr.actions, tr.rewards, tr.next_states, tr.absorbing, tr.last))
     return {
-        "transitions": n, "stored_mb": stored / 2**20, "peak_mb": peak / 2**20,
-        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "seconds": elapsed,
+        "transitions": n,
+        "stored_mb": stored / 2**20,
+        "peak_mb": peak / 2**20,
+        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "seconds": elapsed,
     }
 
 
 # --- The command ----------------------------------------------------------------------------
+
 
 def run(args: argparse.Namespace) -> int:
     """Runs the benchmark; prints a table, or JSON lines with ``--json``. Returns 0."""
@@ -283,8 +311,10 @@ def run(args: argparse.Namespace) -> int:
     emit = (lambda record: print(json.dumps(record), flush=True)) if args.json else _print_record
     info = machine()
     if not args.json:
-        print(f"machine: {info['cpu']}, {info['cores']} cores ({info['usable_cores']} usable), "
-              f"load {info['load_average_1min']}, mujoco {info['mujoco']}, threads {args.threads}")
+        print(
+            f"machine: {info['cpu']}, {info['cores']} cores ({info['usable_cores']} usable), "
+            f"load {info['load_average_1min']}, mujoco {info['mujoco']}, threads {args.threads}"
+        )
     per_domain: dict[str, dict[str, float]] = {}
     for domain in domains:
         task = DOMAINS[domain]
@@ -305,9 +335,7 @@ def run(args: argparse.Namespace) -> int:
         per_domain[domain]["sampler_vs_dm_control"] = (
             figures["sampler"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
         )
-        per_domain[domain]["sampler_vs_rollout"] = (
-            figures["sampler"]["steps_per_s"] / figures["rollout"]["steps_per_s"]
-        )
+        per_domain[domain]["sampler_vs_rollout"] = figures["sampler"]["steps_per_s"] / figures["rollout"]["steps_per_s"]
         # The most any sampler of the same physics could gain over the loop here.
         per_domain[domain]["rollout_vs_dm_control"] = (
             figures["rollout"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
@@ -343,24 +371,35 @@ def _print_record(record: dict[str, Any]) -> None:
     if kind == "steps":
         real_time = f", {record['real_time_factor']:.0f}x real time" if "real_time_factor" in record else ""
         peer = f", {record['env_id']}" if "env_id" in record else ""
-        print(f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
-              f"({record['steps']} steps in {record['seconds']:.2f} s{real_time}{peer})")
+        print(
+            f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
+            f"({record['steps']} steps in {record['seconds']:.2f} s{real_time}{peer})"
+        )
     elif "skipped" in record:
         where = f" for {record['domain']}" if "domain" in record else ""
         print(f"{kind}{where}: skipped ({record['skipped']})")
     elif kind == "fqi":
-        print(f"FQI: {record['transitions']} transitions, {record['features']} RBF features, "
-              f"{record['iterations']} iterations in {record['seconds']:.2f} s")
+        print(
+            f"FQI: {record['transitions']} transitions, {record['features']} RBF features, "
+            f"{record['iterations']} iterations in {record['seconds']:.2f} s"
+        )
     elif kind == "render":
         print(f"render: {record['fps']:.1f} frames/s at 640x480")
     elif kind == "memory":
-        print(f"memory: {record['transitions']} cart-pole transitions stored in {record['stored_mb']:.1f} MB; "
-              f"peak {record['peak_mb']:.1f} MB while collecting ({record['seconds']:.1f} s), "
-              f"process max RSS so far {record['max_rss_mb']:.0f} MB")
+        print(
+            f"memory: {record['transitions']} cart-pole transitions stored in {record['stored_mb']:.1f} MB; "
+            f"peak {record['peak_mb']:.1f} MB while collecting ({record['seconds']:.1f} s), "
+            f"process max RSS so far {record['max_rss_mb']:.0f} MB"
+        )
     elif kind == "summary":
         for domain, figures in record["domains"].items():
-            peer = (f", {figures['sampler_vs_gymnasium']:.2f}x Gymnasium's loop"
-                    if "sampler_vs_gymnasium" in figures else "")
-            print(f"{domain:>13}: sampler {figures['sampler_vs_dm_control']:.1f}x dm_control, "
-                  f"{figures['sampler_vs_rollout']:.2f}x raw rollout{peer} "
-                  f"(raw rollout itself: {figures['rollout_vs_dm_control']:.1f}x dm_control)")
+            peer = (
+                f", {figures['sampler_vs_gymnasium']:.2f}x Gymnasium's loop"
+                if "sampler_vs_gymnasium" in figures
+                else ""
+            )
+            print(
+                f"{domain:>13}: sampler {figures['sampler_vs_dm_control']:.1f}x dm_control, "
+                f"{figures['sampler_vs_rollout']:.2f}x raw rollout{peer} "
+                f"(raw rollout itself: {figures['rollout_vs_dm_control']:.1f}x dm_control)"
+            )

@@ -70,7 +70,8 @@ def _check_out(out: str) -> str | None:
 def _run(args: argparse.Namespace) -> int:
     import signal
 
-    from tatl_mj.experiments import lock, records, runner, spec as spec_mod
+    from tatl_mj.experiments import lock, records, runner
+    from tatl_mj.experiments import spec as spec_mod
 
     resolved = [Path(p).resolve() for p in args.specs]
     twice = sorted({str(p) for p in args.specs if resolved.count(Path(p).resolve()) > 1})
@@ -87,8 +88,11 @@ def _run(args: argparse.Namespace) -> int:
     names = [s.name for s in specs]
     clash = sorted({n for n in names if names.count(n) > 1})
     if clash:
-        print(f"tatl run: experiment name {clash[0]!r} is used by more than one spec: "
-              f"{', '.join(s.path for s in specs if s.name == clash[0])}", file=sys.stderr)
+        print(
+            f"tatl run: experiment name {clash[0]!r} is used by more than one spec: "
+            f"{', '.join(s.path for s in specs if s.name == clash[0])}",
+            file=sys.stderr,
+        )
         return 2
     problem = _check_out(args.out)
     if problem:
@@ -103,14 +107,22 @@ def _run(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         summary = runner.run(
-            specs, args.preset, seeds, args.out, workers=args.workers, executor=args.executor,
-            address=args.address, methods=methods,
+            specs,
+            args.preset,
+            seeds,
+            args.out,
+            workers=args.workers,
+            executor=args.executor,
+            address=args.address,
+            methods=methods,
         )
     except Interrupted as stop:
         name = signal.Signals(stop.signum).name
         # Leading newline: the progress bar's line is left unfinished.
-        print(f"\ntatl run: stopped by {name}; finished units are kept in {args.out}, "
-              f"run the same command to resume", file=sys.stderr)
+        print(
+            f"\ntatl run: stopped by {name}; finished units are kept in {args.out}, run the same command to resume",
+            file=sys.stderr,
+        )
         return 128 + stop.signum
     except lock.LockHeld as error:
         print(f"tatl run: {error}", file=sys.stderr)
@@ -126,6 +138,8 @@ def _run(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     failures = summary.get("failures", [])
+    print("time per experiment and phase (all seeds, phases under 5% not shown):")
+    print(runner.format_timings(runner.timings(args.out)))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     for line in failures:
         print(f"FAILED {line}", file=sys.stderr)
@@ -151,9 +165,7 @@ def _methods(text: str | None) -> dict | None:
     for entry in filter(None, (e.strip() for e in text.split(","))):
         if ":" not in entry:
             if entry not in registry.METHODS:
-                raise ValueError(
-                    f"unknown method {entry!r}; built-ins: {sorted(registry.METHODS)}, or module:Class"
-                )
+                raise ValueError(f"unknown method {entry!r}; built-ins: {sorted(registry.METHODS)}, or module:Class")
             methods[entry] = None
             continue
         module_name, _, attr = entry.partition(":")
@@ -179,8 +191,11 @@ def _plot(args: argparse.Namespace) -> int:
         print(f"tatl plot: {error}", file=sys.stderr)
         return 2
     except (KeyError, TypeError, AttributeError) as error:
-        print(f"tatl plot: {Path(args.dir) / 'summary.json'} is malformed ({type(error).__name__}: {error}); "
-              f"rerun `tatl run` to rebuild it", file=sys.stderr)
+        print(
+            f"tatl plot: {Path(args.dir) / 'summary.json'} is malformed ({type(error).__name__}: {error}); "
+            f"rerun `tatl run` to rebuild it",
+            file=sys.stderr,
+        )
         return 2
     except OSError as error:
         print(f"tatl plot: cannot write {error.filename or args.dir}: {error.strerror or error}", file=sys.stderr)
@@ -195,8 +210,16 @@ def _render(args: argparse.Namespace) -> int:
 
     try:
         path = clips.render_from_spec(
-            args.spec, method=args.method, seed=args.seed, out=args.out, seconds=args.seconds,
-            width=args.width, height=args.height, fps=args.fps, preset=args.preset, run_dir=args.run_dir,
+            args.spec,
+            method=args.method,
+            seed=args.seed,
+            out=args.out,
+            seconds=args.seconds,
+            width=args.width,
+            height=args.height,
+            fps=args.fps,
+            preset=args.preset,
+            run_dir=args.run_dir,
             with_source=args.with_source,
         )
     except (ValueError, FileNotFoundError) as error:  # SpecError is a ValueError
@@ -250,9 +273,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
-    p.add_argument("--methods", default=None,
-                   help="comma-separated built-in methods and/or your own as module:Class "
-                        "(default: the methods each spec lists)")
+    p.add_argument(
+        "--methods",
+        default=None,
+        help="comma-separated built-in methods and/or your own as module:Class (default: the methods each spec lists)",
+    )
     p.set_defaults(func=_run)
 
     p = sub.add_parser("plot", help="figures and results table of a finished run")

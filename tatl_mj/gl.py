@@ -160,12 +160,13 @@ def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
             return name
         errors.append(f"  {name}: {error}")
 
-    how = f"MUJOCO_GL={requested} (set in the environment)" if requested else (
-        "MUJOCO_GL is unset, so tried " + ", then ".join(AUTO_ORDER)
+    how = (
+        f"MUJOCO_GL={requested} (set in the environment)"
+        if requested
+        else ("MUJOCO_GL is unset, so tried " + ", then ".join(AUTO_ORDER))
     )
     raise GLBackendError(
-        f"No working OpenGL backend for headless rendering. {how}.\n"
-        + "\n".join(errors) + "\n" + _FIX
+        f"No working OpenGL backend for headless rendering. {how}.\n" + "\n".join(errors) + "\n" + _FIX
     )
 
 
@@ -180,8 +181,12 @@ def probe(name: str, environ: MutableMapping[str, str] = os.environ) -> str | No
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     try:
         result = subprocess.run(
-            [sys.executable, "-c", _PROBE, name], env=env, capture_output=True, text=True,
-            timeout=PROBE_TIMEOUT_S, check=False,
+            [sys.executable, "-c", _PROBE, name],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT_S,
+            check=False,
         )
     except subprocess.TimeoutExpired:
         return f"the probe hung for more than {PROBE_TIMEOUT_S:.0f} s"

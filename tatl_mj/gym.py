@@ -54,9 +54,16 @@ GYM_IDS: dict[str, tuple[str, str]] = {gym_id(d, t): (d, t) for d, t in PHYSICS_
 class TatlEnv(gymnasium.Env):
     """A tatl-mj physics task as a Gymnasium environment (see the module docstring)."""
 
-    def __init__(self, domain: str, task: str, task_kwargs: dict[str, Any] | None = None,
-                 render_mode: str | None = None, width: int = 480, height: int = 480,
-                 camera: str = "tracking") -> None:
+    def __init__(
+        self,
+        domain: str,
+        task: str,
+        task_kwargs: dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        camera: str = "tracking",
+    ) -> None:
         if (domain, task) not in PHYSICS_TASKS:
             raise ValueError(f"unknown physics task {domain}/{task}; valid: {[f'{d}/{t}' for d, t in PHYSICS_TASKS]}")
         if render_mode is not None and render_mode not in RENDER_MODES:
@@ -65,11 +72,17 @@ class TatlEnv(gymnasium.Env):
         (size,) = self._env.observation_spec()["state"].shape
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float64)
         action = self._env.action_spec()
-        self.action_space = spaces.Box(np.asarray(action.minimum, np.float64), np.asarray(action.maximum, np.float64),
-                                       shape=action.shape, dtype=np.float64)
+        self.action_space = spaces.Box(
+            np.asarray(action.minimum, np.float64),
+            np.asarray(action.maximum, np.float64),
+            shape=action.shape,
+            dtype=np.float64,
+        )
         self.render_mode = render_mode
-        self.metadata = {"render_modes": list(RENDER_MODES),
-                         "render_fps": int(round(1.0 / self._env.control_timestep()))}
+        self.metadata = {
+            "render_modes": list(RENDER_MODES),
+            "render_fps": int(round(1.0 / self._env.control_timestep())),
+        }
         self._size = (height, width)
         self._camera = camera
 
@@ -78,8 +91,9 @@ class TatlEnv(gymnasium.Env):
         """The wrapped dm_env environment (``suite.load``'s)."""
         return self._env
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         if seed is not None:
             self._env.task.random.seed(seed)

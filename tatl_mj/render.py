@@ -98,10 +98,20 @@ def render_episode(
     """
     frames = None
     count = 0
-    for k, frame in enumerate(iter_frames(
-        env, policy, seconds=seconds, width=width, height=height, fps=fps,
-        method_label=method_label, camera=camera, source=source, on_end=on_end,
-    )):
+    for k, frame in enumerate(
+        iter_frames(
+            env,
+            policy,
+            seconds=seconds,
+            width=width,
+            height=height,
+            fps=fps,
+            method_label=method_label,
+            camera=camera,
+            source=source,
+            on_end=on_end,
+        )
+    ):
         if frames is None:
             frames = np.empty((_frame_count(seconds, fps),) + frame.shape, np.uint8)
         frames[k] = frame
@@ -132,8 +142,7 @@ def iter_frames(
     _check_size("height", height)
     if on_end not in END_MODES:
         raise ValueError(f"on_end must be one of {END_MODES}, got {on_end!r}")
-    if source is not None and (not isinstance(source, tuple) or len(source) != 2
-                               or not callable(source[1])):
+    if source is not None and (not isinstance(source, tuple) or len(source) != 2 or not callable(source[1])):
         raise ValueError("source must be a tuple (source_env, source_state_fn)")
 
     step_seconds = _step_seconds(env)
@@ -175,10 +184,14 @@ def iter_frames(
 
             state = _state(timestep)
             text = _overlay_text(
-                clock=f"t {episode_steps * step_seconds:5.2f} s" if hasattr(env, "physics")
+                clock=f"t {episode_steps * step_seconds:5.2f} s"
+                if hasattr(env, "physics")
                 else f"step {episode_steps:3d}",
-                method_label=method_label, episode_return=episode_return, episode=episode,
-                previous_end=previous_end, ended=ended,
+                method_label=method_label,
+                episode_return=episode_return,
+                episode=episode,
+                previous_end=previous_end,
+                ended=ended,
             )
             image = _label(paint(), text, "top")
             image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
@@ -192,8 +205,9 @@ def iter_frames(
             yield image
 
 
-def _overlay_text(*, clock: str, method_label: str, episode_return: float, episode: int,
-                  previous_end: str, ended: str) -> str:
+def _overlay_text(
+    *, clock: str, method_label: str, episode_return: float, episode: int, previous_end: str, ended: str
+) -> str:
     """The top overlay: clock, method, return, episode number (and why the last one ended)."""
     text = clock
     if method_label:
@@ -215,9 +229,7 @@ def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps:
     path = Path(path)
     extension = path.suffix.lower()
     if extension not in CLIP_EXTENSIONS:
-        raise ValueError(
-            f"path {str(path)!r}: clip extension must be one of {CLIP_EXTENSIONS}, got {extension!r}"
-        )
+        raise ValueError(f"path {str(path)!r}: clip extension must be one of {CLIP_EXTENSIONS}, got {extension!r}")
     if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps!r}")
     checked = (_check_frame(i, frame) for i, frame in enumerate(frames))
@@ -232,8 +244,14 @@ def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps:
     count = 0
     try:
         with imageio_v2.get_writer(
-            path, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-            pixelformat="yuv420p", macro_block_size=2, quality=5,
+            path,
+            format="FFMPEG",
+            mode="I",
+            fps=fps,
+            codec="libx264",
+            pixelformat="yuv420p",
+            macro_block_size=2,
+            quality=5,
         ) as writer:
             for frame in checked:
                 pad = ((0, frame.shape[0] % 2), (0, frame.shape[1] % 2), (0, 0))
@@ -253,8 +271,9 @@ Painter = Callable[[], np.ndarray]
 StatePainter = Callable[[np.ndarray], np.ndarray]
 
 
-def _painter(env: Any, width: int, height: int, camera: str,
-             stack: contextlib.ExitStack) -> tuple[Painter, StatePainter]:
+def _painter(
+    env: Any, width: int, height: int, camera: str, stack: contextlib.ExitStack
+) -> tuple[Painter, StatePainter]:
     """Two functions drawing ``env`` as a fresh (height, width, 3) uint8 image.
 
     ``paint()`` draws the current state; ``show(state)`` draws ``state`` (for a
@@ -266,16 +285,13 @@ def _painter(env: Any, width: int, height: int, camera: str,
     physics = getattr(env, "physics", None)
     if physics is None:
         raise ValueError(
-            f"env must be a tatl-mj task (a MuJoCo environment or one with a painter), "
-            f"got {type(env).__name__}"
+            f"env must be a tatl-mj task (a MuJoCo environment or one with a painter), got {type(env).__name__}"
         )
     model = physics.model
     camera_id = mujoco.mj_name2id(model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, camera)
     if camera_id < 0:
         cameras = [model.id2name(i, "camera") for i in range(model.ncam)]
-        raise ValueError(
-            f"camera {camera!r} is not in the {_domain_name(env)} model; valid choices: {cameras}"
-        )
+        raise ValueError(f"camera {camera!r} is not in the {_domain_name(env)} model; valid choices: {cameras}")
     renderer = None
 
     def close() -> None:
@@ -302,6 +318,7 @@ def _painter(env: Any, width: int, height: int, camera: str,
 
 # --- Overlay --------------------------------------------------------------------
 
+
 def _label(image: np.ndarray, text: str, where: str) -> np.ndarray:
     """Writes ``text`` on a darkened strip at the top or bottom left of ``image`` (in place)."""
     height = image.shape[0]
@@ -310,7 +327,7 @@ def _label(image: np.ndarray, text: str, where: str) -> np.ndarray:
     left, top, right, bottom = font.getbbox(text)
     y = margin if where == "top" else height - (bottom - top) - 3 * margin
     # Only the strip goes through Pillow: whole-frame copies would cost more than the text.
-    strip = image[y:y + bottom - top + 2 * margin, :right + 3 * margin]
+    strip = image[y : y + bottom - top + 2 * margin, : right + 3 * margin]
     canvas = Image.fromarray(strip // 3)  # dark background keeps the text legible
     ImageDraw.Draw(canvas).text((margin, margin - top), text, font=font, fill=(255, 255, 255))
     strip[...] = np.asarray(canvas)
@@ -328,10 +345,10 @@ def _font(size: int) -> Any:
 
 # --- Helpers ------------------------------------------------------------------
 
+
 def _frame_count(seconds: float, fps: float) -> int:
     for name, value in (("seconds", seconds), ("fps", fps)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value <= 0:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
             raise ValueError(f"{name} must be a positive number, got {value!r}")
     n = int(round(seconds * fps))
     if n < 1:
@@ -348,8 +365,7 @@ def _check_frame(index: int, frame: np.ndarray) -> np.ndarray:
     frame = np.asarray(frame)
     if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
         raise ValueError(
-            f"frames[{index}] must be an (H, W, 3) uint8 RGB image, got shape "
-            f"{frame.shape} dtype {frame.dtype}"
+            f"frames[{index}] must be an (H, W, 3) uint8 RGB image, got shape {frame.shape} dtype {frame.dtype}"
         )
     return frame
 
@@ -374,8 +390,7 @@ def _action(policy: Policy, state: np.ndarray) -> np.ndarray:
     action = np.asarray(policy(state[None]))
     if action.ndim == 0 or action.shape[0] != 1:
         raise ValueError(
-            f"policy must map a (1, {state.size}) state batch to a batch of one action, "
-            f"got shape {action.shape}"
+            f"policy must map a (1, {state.size}) state batch to a batch of one action, got shape {action.shape}"
         )
     return action[0]
 

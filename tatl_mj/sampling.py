@@ -70,6 +70,7 @@ _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
 
 # --- Simulators ------------------------------------------------------------------
 
+
 def _kwargs_key(task_kwargs: dict[str, Any] | None) -> tuple[tuple[str, Any], ...]:
     kwargs = dict(task_kwargs or {})
     if "random" in kwargs:
@@ -157,7 +158,11 @@ class _Simulator:
         self.place(batch, ids, *env.task.start_configurations(env.physics, len(ids)))
 
     def advance(
-        self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray, first: np.ndarray,
+        self,
+        batch: mujoco.batch.Batch,
+        ids: np.ndarray,
+        controls: np.ndarray,
+        first: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         """One control step of simulations ``ids`` (sorted): (next paper states, diverged).
 
@@ -222,6 +227,7 @@ def is_batched(domain: str, task: str, task_kwargs: dict[str, Any] | None = None
 
 # --- Argument checks -----------------------------------------------------------
 
+
 def _check_count(name: str, value: Any, minimum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
@@ -257,6 +263,7 @@ def _observed_state(timestep: dm_env.TimeStep) -> np.ndarray:
 
 
 # --- Collection ------------------------------------------------------------------
+
 
 class _Episodes:
     """Lengths of started episodes and which ones the first n transitions still need."""
@@ -302,7 +309,8 @@ def _expected_remaining(ended: np.ndarray, ages: np.ndarray, limit: float) -> tu
     sorted_ages = np.sort(ages)
     times, deaths = np.unique(ended, return_counts=True)
     at_risk = (len(ended) - np.searchsorted(ended, times, side="left")) + (
-        len(ages) - np.searchsorted(sorted_ages, times, side="left"))
+        len(ages) - np.searchsorted(sorted_ages, times, side="left")
+    )
     longest = max(ended[-1], sorted_ages[-1] if len(ages) else 0.0)
     tail_end = max(min(2.0 * longest, limit), longest)
     edges = np.concatenate([[0.0], times, [tail_end]])
@@ -423,8 +431,12 @@ def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
 
 
 def _collect_env(
-    sim: _Simulator, n: int, seed: int, rng: np.random.Generator,
-    policy: IndexPolicy | None, max_episode_steps: int | None,
+    sim: _Simulator,
+    n: int,
+    seed: int,
+    rng: np.random.Generator,
+    policy: IndexPolicy | None,
+    max_episode_steps: int | None,
 ) -> Transitions:
     """A plain loop over one environment (time-varying models, tasks without physics)."""
     env = sim.make_env(seed)
@@ -432,8 +444,12 @@ def _collect_env(
     state = _observed_state(env.reset())
     d = len(state)
     out = {
-        "states": np.empty((n, d)), "actions": np.empty(n, np.int64), "rewards": np.empty(n),
-        "next_states": np.empty((n, d)), "absorbing": np.zeros(n, bool), "last": np.zeros(n, bool),
+        "states": np.empty((n, d)),
+        "actions": np.empty(n, np.int64),
+        "rewards": np.empty(n),
+        "next_states": np.empty((n, d)),
+        "absorbing": np.zeros(n, bool),
+        "last": np.zeros(n, bool),
     }
     i = 0
     while i < n:
@@ -461,6 +477,7 @@ def _collect_env(
 
 
 # --- One-step queries and evaluation ------------------------------------------------
+
 
 def step_from(
     domain: str,
@@ -587,7 +604,11 @@ def evaluate(
 
 
 def _evaluate_env(
-    sim: _Simulator, policy: ValuePolicy, n_episodes: int, seed: int, max_episode_steps: int | None,
+    sim: _Simulator,
+    policy: ValuePolicy,
+    n_episodes: int,
+    seed: int,
+    max_episode_steps: int | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Lockstep over one environment per episode, seeded ``(seed, i)``."""
     envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
@@ -638,9 +659,14 @@ def policy_transitions(
             steps += 1
             next_state = _observed_state(timestep)
             last = timestep.last() or steps == max_episode_steps or len(rows["states"]) + 1 == n
-            for key, value in (("states", state), ("actions", index), ("rewards", timestep.reward),
-                               ("next_states", next_state), ("last", last),
-                               ("absorbing", timestep.last() and timestep.discount == 0.0)):
+            for key, value in (
+                ("states", state),
+                ("actions", index),
+                ("rewards", timestep.reward),
+                ("next_states", next_state),
+                ("last", last),
+                ("absorbing", timestep.last() and timestep.discount == 0.0),
+            ):
                 rows[key].append(value)
             if last:
                 break

@@ -36,8 +36,12 @@ class Transitions:
 
     def __post_init__(self) -> None:
         cast = {
-            "states": np.float64, "actions": np.int64, "rewards": np.float64,
-            "next_states": np.float64, "absorbing": np.bool_, "last": np.bool_,
+            "states": np.float64,
+            "actions": np.int64,
+            "rewards": np.float64,
+            "next_states": np.float64,
+            "absorbing": np.bool_,
+            "last": np.bool_,
         }
         for name, dtype in cast.items():
             object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype=dtype))

@@ -24,10 +24,12 @@ BENCH_CAPSIZE_SPEED = 6.024262  # m/s
 
 def benchmark_eigenvalues(speed: float) -> np.ndarray:
     inv = np.linalg.inv(BENCH_M)
-    a = np.block([
-        [np.zeros((2, 2)), np.eye(2)],
-        [-inv @ (9.81 * BENCH_K0 + speed**2 * BENCH_K2), -inv @ (speed * BENCH_C1)],
-    ])
+    a = np.block(
+        [
+            [np.zeros((2, 2)), np.eye(2)],
+            [-inv @ (9.81 * BENCH_K0 + speed**2 * BENCH_K2), -inv @ (speed * BENCH_C1)],
+        ]
+    )
     return np.linalg.eigvals(a)
 
 
@@ -64,6 +66,7 @@ def steer_into_fall(state, discrete=False):
 
 # --- Specs and validation -------------------------------------------------------
 
+
 def test_specs_and_actions():
     env = make_env()
     spec = env.action_spec()
@@ -89,8 +92,12 @@ def test_same_seed_same_episode():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"speed": 0.0}, "speed"), ({"speed": float("nan")}, "speed"), ({"cg_noise": -0.01}, "cg_noise"),
-     ({"cg_noise": 0.5}, "cg_noise")],
+    [
+        ({"speed": 0.0}, "speed"),
+        ({"speed": float("nan")}, "speed"),
+        ({"cg_noise": -0.01}, "cg_noise"),
+        ({"cg_noise": 0.5}, "cg_noise"),
+    ],
 )
 def test_bad_task_kwargs(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -99,9 +106,13 @@ def test_bad_task_kwargs(kwargs, field):
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"rider_mass": 85.0}, "rider_mass"), ({"tyre_half_width": 0.0}, "tyre_half_width"),
-     ({"tyre_friction": -1.0}, "tyre_friction"), ({"gravity": float("inf")}, "gravity"),
-     ({"rider_mass": 0.0}, "rider_mass")],
+    [
+        ({"rider_mass": 85.0}, "rider_mass"),
+        ({"tyre_half_width": 0.0}, "tyre_half_width"),
+        ({"tyre_friction": -1.0}, "tyre_friction"),
+        ({"gravity": float("inf")}, "gravity"),
+        ({"rider_mass": 0.0}, "rider_mass"),
+    ],
 )
 def test_bad_params(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -117,9 +128,19 @@ def test_default_params_reproduce_the_xml():
     """model_xml(BicycleParams()) compiles to the same masses, inertias and gears as the file."""
     plain = mujoco.MjModel.from_xml_string(*bicycle.model_xml())
     edited = mujoco.MjModel.from_xml_string(*bicycle.model_xml(bicycle.BicycleParams()))
-    for field in ("body_mass", "body_inertia", "body_ipos", "actuator_gainprm", "actuator_biasprm",
-                  "actuator_gear", "site_pos", "geom_size", "geom_friction", "opt.gravity"):
-        get = (lambda m: m.opt.gravity) if field == "opt.gravity" else (lambda m: getattr(m, field))
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "body_ipos",
+        "actuator_gainprm",
+        "actuator_biasprm",
+        "actuator_gear",
+        "site_pos",
+        "geom_size",
+        "geom_friction",
+        "opt.gravity",
+    ):
+        get = (lambda m: m.opt.gravity) if field == "opt.gravity" else (lambda m, f=field: getattr(m, f))
         np.testing.assert_allclose(get(edited), get(plain), rtol=1e-6, err_msg=field)
     # The split rear body keeps the benchmark's 85 kg at (0.3, 0, 0.9) above the rear contact.
     data = mujoco.MjData(plain)
@@ -141,11 +162,17 @@ def test_default_params_reproduce_the_xml():
 
 # --- State vector ---------------------------------------------------------------
 
+
 def random_states(n, seed=0):
     rng = np.random.default_rng(seed)
-    return np.column_stack([
-        rng.uniform(-0.5, 0.5, n), rng.uniform(-2, 2, n), rng.uniform(-0.3, 0.3, n), rng.uniform(-1, 1, n),
-    ])
+    return np.column_stack(
+        [
+            rng.uniform(-0.5, 0.5, n),
+            rng.uniform(-2, 2, n),
+            rng.uniform(-0.3, 0.3, n),
+            rng.uniform(-1, 1, n),
+        ]
+    )
 
 
 def test_state_round_trip_and_getters():
@@ -195,14 +222,13 @@ def test_set_state_puts_both_tyres_on_the_floor_rolling_without_slip():
 def test_frame_pitch_is_even_and_zero_upright():
     assert bicycle.frame_pitch(0.0, 0.0) == pytest.approx(0.0, abs=1e-15)
     roll, steer = np.array([0.1, 0.2, 0.0]), np.array([0.3, -0.2, 0.5])
-    np.testing.assert_allclose(
-        bicycle.frame_pitch(roll, steer), bicycle.frame_pitch(-roll, -steer), atol=1e-14
-    )
+    np.testing.assert_allclose(bicycle.frame_pitch(roll, steer), bicycle.frame_pitch(-roll, -steer), atol=1e-14)
     # Steering lowers the front (the tilted steer axis): positive pitch (nose down).
     assert bicycle.frame_pitch(0.0, 0.5) > 1e-3
 
 
 # --- Task -----------------------------------------------------------------------
+
 
 def test_controls_draw_rider_noise_and_add_speed():
     task = bicycle.Task(speed=3.0, cg_noise=0.02)
@@ -305,9 +331,14 @@ def test_cg_noise_is_the_rider_weight_moved_sideways():
 def test_reward_and_fall():
     task = bicycle.Task()
     limit = math.pi / 15
-    states = np.array([
-        [0, 0, 0, 0], [0.3, 1, limit - 1e-6, -2], [0, 0, -limit - 1e-6, 0], [0, 0, limit + 1e-6, 0],
-    ])
+    states = np.array(
+        [
+            [0, 0, 0, 0],
+            [0.3, 1, limit - 1e-6, -2],
+            [0, 0, -limit - 1e-6, 0],
+            [0, 0, limit + 1e-6, 0],
+        ]
+    )
     np.testing.assert_array_equal(task.batch_absorbing(states), [False, False, True, True])
     np.testing.assert_array_equal(task.batch_reward(states), [1.0, 1.0, 0.0, 0.0])
 
@@ -347,14 +378,13 @@ def test_rollout_reproduces_the_environment():
         model, mujoco.MjData(model), start[None], np.repeat(ctrl, substeps, axis=0)[None]
     )
     nq = model.nq
-    qpos = rolled[0, substeps - 1::substeps, 1:1 + nq]
-    qvel = rolled[0, substeps - 1::substeps, 1 + nq:1 + nq + model.nv]
+    qpos = rolled[0, substeps - 1 :: substeps, 1 : 1 + nq]
+    qvel = rolled[0, substeps - 1 :: substeps, 1 + nq : 1 + nq + model.nv]
     np.testing.assert_allclose(physics.states_from(qpos, qvel), np.array(states), atol=1e-9)
 
 
-
-
 # --- Validation against the benchmark ---------------------------------------------
+
 
 @pytest.mark.parametrize("speed", [2.778, 4.0, 5.0])
 def test_lateral_eigenvalues_match_the_benchmark(speed):

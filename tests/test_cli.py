@@ -13,8 +13,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def tatl(*args: str, env: dict | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "tatl_mj.cli", *args], capture_output=True, text=True,
-                          timeout=timeout, env={**os.environ, **(env or {})}, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "tatl_mj.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+        cwd=ROOT,
+    )
 
 
 def test_list_prints_every_task():
@@ -59,16 +65,40 @@ def test_run_with_a_plugin_method(tmp_path):
     spec = write_tiny(tmp_path)
     out = tmp_path / "out"
     env = {"PYTHONPATH": str(ROOT / "tests")}
-    done = tatl("run", str(spec), "--preset", "tiny", "--seeds", "1", "--workers", "1", "--out", str(out),
-                "--methods", "rl,plugin_method:ZeroTorque", env=env)
+    done = tatl(
+        "run",
+        str(spec),
+        "--preset",
+        "tiny",
+        "--seeds",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+        "--methods",
+        "rl,plugin_method:ZeroTorque",
+        env=env,
+    )
     assert done.returncode == 0, done.stderr
     methods = json.loads((out / "summary.json").read_text())["experiments"]["ip_to_flipped_ip"]["methods"]
     assert set(methods) == {"rl", "zero"}
     bad = tatl("run", str(spec), "--preset", "tiny", "--out", str(out), "--methods", "ta-tl,nope:Missing")
     assert bad.returncode == 2 and "cannot import 'nope:Missing'" in bad.stderr
     # A discrete target (the grid world): the plug-in's policy returns action indices.
-    grid = tatl("run", "tasks/grid_to_windy.toml", "--seeds", "1", "--workers", "1", "--out", str(tmp_path / "grid"),
-                "--methods", "plugin_method:ZeroTorque", env=env)
+    grid = tatl(
+        "run",
+        "tasks/grid_to_windy.toml",
+        "--seeds",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path / "grid"),
+        "--methods",
+        "plugin_method:ZeroTorque",
+        env=env,
+    )
     assert grid.returncode == 0, grid.stderr
     zero = json.loads((tmp_path / "grid" / "summary.json").read_text())["experiments"]["grid_to_windy"]["methods"]
     assert np.isfinite(zero["zero"]["final_return"])
@@ -76,8 +106,22 @@ def test_run_with_a_plugin_method(tmp_path):
 
 def test_render_random_grid_world_clip(tmp_path):
     clip = tmp_path / "grid.mp4"
-    done = tatl("render", "tasks/grid_to_windy.toml", "--method", "random", "--seconds", "1", "--fps", "8",
-                "--width", "160", "--height", "120", "--out", str(clip))
+    done = tatl(
+        "render",
+        "tasks/grid_to_windy.toml",
+        "--method",
+        "random",
+        "--seconds",
+        "1",
+        "--fps",
+        "8",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--out",
+        str(clip),
+    )
     assert done.returncode == 0, done.stderr
     frames = iio.imread(clip)
     assert frames.shape[0] == 8 and frames.shape[1:3] == (120, 160)
@@ -87,16 +131,38 @@ def test_render_random_grid_world_clip(tmp_path):
 
 def test_render_side_by_side_with_the_source(tmp_path):
     clip = tmp_path / "pair.mp4"
-    done = tatl("render", "tasks/grid_to_windy.toml", "--method", "ta-tl", "--with-source", "--seconds", "1",
-                "--fps", "4", "--width", "160", "--height", "120", "--out", str(clip))
+    done = tatl(
+        "render",
+        "tasks/grid_to_windy.toml",
+        "--method",
+        "ta-tl",
+        "--with-source",
+        "--seconds",
+        "1",
+        "--fps",
+        "4",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--out",
+        str(clip),
+    )
     assert done.returncode == 0, done.stderr
     frames = iio.imread(clip)
     assert frames.shape == (4, 120, 320, 3)  # target and source panels side by side
 
 
 def test_render_with_no_working_backend_says_how_to_fix(tmp_path):
-    done = tatl("render", "tasks/grid_to_windy.toml", "--method", "random", "--out", str(tmp_path / "x.mp4"),
-                env={"MUJOCO_GL": "nonsense"})
+    done = tatl(
+        "render",
+        "tasks/grid_to_windy.toml",
+        "--method",
+        "random",
+        "--out",
+        str(tmp_path / "x.mp4"),
+        env={"MUJOCO_GL": "nonsense"},
+    )
     assert done.returncode == 1
     assert "MUJOCO_GL" in done.stderr and "Traceback" not in done.stderr
     assert not (tmp_path / "x.mp4").exists()

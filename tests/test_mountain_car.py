@@ -103,9 +103,7 @@ def test_matches_bead_on_curve_equation(env):
     times = DT * np.arange(1, n + 1)
     for x0, throttle in [(-1.0, 0.0), (-0.5, 1.0), (-0.3, -1.0)]:
         states, *_ = _run(env, [x0, 0.0], lambda s, u=throttle: u, n)
-        solution = solve_ivp(
-            bead, (0.0, times[-1]), [x0, 0.0], args=(throttle,), t_eval=times, rtol=1e-10, atol=1e-12
-        )
+        solution = solve_ivp(bead, (0.0, times[-1]), [x0, 0.0], args=(throttle,), t_eval=times, rtol=1e-10, atol=1e-12)
         assert np.ptp(states[:, 0]) > 0.2  # a real swing, not a car at rest
         np.testing.assert_allclose(states[:, 0], solution.y[0], atol=2e-3)
         np.testing.assert_allclose(states[:, 1], solution.y[1] * DT, atol=5e-4)

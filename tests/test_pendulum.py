@@ -59,7 +59,7 @@ def test_mass_and_length_edit_changes_angular_acceleration(length, mass, torque)
     physics.set_pendulum(length, mass)
     after = angular_acceleration()
     # Point mass m at L: (m L^2) theta_dd = m g L sin(theta) + u (tip inertia is < 0.3 %).
-    expected = (mass * G * length * math.sin(theta) + torque) / (mass * length ** 2)
+    expected = (mass * G * length * math.sin(theta) + torque) / (mass * length**2)
     assert after == pytest.approx(expected, rel=0.005)
     assert abs(after - before) > 0.05 * abs(before)
     # Derived fields were recomputed by mj_setConst, not only the raw ones written.
@@ -144,7 +144,7 @@ def test_constant_full_torque_never_gets_above_horizontal(index):
 
 def test_energy_pumping_reaches_upright_and_holds():
     m, length = 1.0, 1.0
-    inertia = m * length ** 2 + 0.4 * m * pendulum.TIP_RADIUS ** 2
+    inertia = m * length**2 + 0.4 * m * pendulum.TIP_RADIUS**2
     top = m * G * length  # energy at rest upright
 
     def pump_then_catch(state: np.ndarray) -> np.ndarray:
@@ -152,7 +152,7 @@ def test_energy_pumping_reaches_upright_and_holds():
         if abs(theta) < 0.5:  # near the top: bang-bang PD with a dead band
             u = -(30.0 * theta + 8.0 * theta_dot)
             return pendulum.ACTIONS[2] if u > 1 else pendulum.ACTIONS[0] if u < -1 else pendulum.ACTIONS[1]
-        energy = 0.5 * inertia * theta_dot ** 2 + m * G * length * math.cos(theta)
+        energy = 0.5 * inertia * theta_dot**2 + m * G * length * math.cos(theta)
         if energy >= top:
             return pendulum.ACTIONS[1]
         return pendulum.ACTIONS[2] if theta_dot >= 0 else pendulum.ACTIONS[0]  # push along the motion
@@ -171,9 +171,9 @@ def test_determinism(task):
     def episode(seed):
         env = suite.load("pendulum", task, task_kwargs={"random": seed, "time_limit": 2.0})
         actions = np.random.default_rng(5).integers(0, 3, size=40)
-        return np.array([env.reset().observation["state"]] + [
-            env.step(pendulum.ACTIONS[a]).observation["state"] for a in actions
-        ])
+        return np.array(
+            [env.reset().observation["state"]] + [env.step(pendulum.ACTIONS[a]).observation["state"] for a in actions]
+        )
 
     first = episode(4)
     np.testing.assert_array_equal(first, episode(4))
@@ -197,7 +197,7 @@ def test_state_round_trip_and_wrapping():
 def test_reward_is_the_papers():
     task = pendulum.Task(pendulum.PendulumParams())
     states = np.array([[0.0, 0.0], [math.pi, 0.0], [0.5, -2.0]])
-    np.testing.assert_allclose(task.batch_reward(states), [0.0, -10 * math.pi ** 2, -2.5 - 20.0])
+    np.testing.assert_allclose(task.batch_reward(states), [0.0, -10 * math.pi**2, -2.5 - 20.0])
 
 
 def test_params_are_applied():

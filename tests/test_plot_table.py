@@ -23,16 +23,29 @@ def experiment(reach: dict, seeds: dict | None = None) -> dict:
     for name, values in reach.items():
         own = (seeds or {}).get(name, list(range(len(values))))
         curves = [curve_for(v) for v in values]
-        methods[name] = {"seeds": own, "final_return": [c[-1] for c in curves],
-                         "curve": {"samples": BUDGETS, "mean_return": curves}}
+        methods[name] = {
+            "seeds": own,
+            "final_return": [c[-1] for c in curves],
+            "curve": {"samples": BUDGETS, "mean_return": curves},
+        }
     all_seeds = sorted({s for m in methods.values() for s in m["seeds"]})
-    return {"spec": {"title": "Toy"}, "methods": methods, "source_seeds": all_seeds,
-            "random_returns": [0.0] * len(all_seeds), "mapping_target_samples": [10]}
+    return {
+        "spec": {"title": "Toy"},
+        "methods": methods,
+        "source_seeds": all_seeds,
+        "random_returns": [0.0] * len(all_seeds),
+        "mapping_target_samples": [10],
+    }
 
 
 def summary(reach: dict, seeds: dict | None = None, methods: list | None = None) -> dict:
-    return {"preset": "p", "seeds": [0, 1, 2], "threshold_fraction": 0.95, "methods": methods or list(reach),
-            "experiments": {"toy": experiment(reach, seeds)}}
+    return {
+        "preset": "p",
+        "seeds": [0, 1, 2],
+        "threshold_fraction": 0.95,
+        "methods": methods or list(reach),
+        "experiments": {"toy": experiment(reach, seeds)},
+    }
 
 
 def row(table: str, label: str) -> list[str]:
@@ -45,8 +58,10 @@ def test_ratio_is_the_median_over_ta_tl_median():
     assert row(table, "TA-TL")[2:] == ["100 (100, 100, never; 2/3 reached)", "-"]
     assert row(table, "UMA-TL")[2:] == ["1,000 (1,000, 1,000, 100; 3/3 reached)", "10.0x"]
     # RL's median seed never reached it: the ratio is at least the largest budget over TA-TL's.
-    assert row(table, "RL (no transfer)")[2:] == ["never (never, never, 1,000; 1/3 reached)",
-                                                  "> 100x (median seed never reached it)"]
+    assert row(table, "RL (no transfer)")[2:] == [
+        "never (never, never, 1,000; 1/3 reached)",
+        "> 100x (median seed never reached it)",
+    ]
     assert row(table, "TA-TL")[1] == "8.333 ± 2.4 (10)"
     assert "Seed sets differ" not in table
 
@@ -59,12 +74,15 @@ def test_ratio_when_ta_tl_never_reaches_the_threshold():
 
 def test_table_compares_only_shared_seeds_and_says_so():
     # TA-TL finished seed 0 only; UMA-TL finished 0 and 1 and reached it only on seed 1.
-    table = plot.table(summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []},
-                               seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []}))
+    table = plot.table(
+        summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []}, seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []})
+    )
     assert row(table, "UMA-TL")[2] == "never (never; 0/1 reached)"
     assert row(table, "TA-TL")[2] == "100 (100; 1/1 reached)"
-    assert ("Seed sets differ: compared over seeds [0], the ones every method finished; UMA-TL also "
-            "finished [1] (not compared); RL (no transfer) finished no seed (not shown).") in table
+    assert (
+        "Seed sets differ: compared over seeds [0], the ones every method finished; UMA-TL also "
+        "finished [1] (not compared); RL (no transfer) finished no seed (not shown)."
+    ) in table
 
 
 def test_table_without_meaningful_threshold_judges_final_returns():
@@ -111,6 +129,6 @@ def test_figure_is_drawn_for_any_number_of_methods(tmp_path, case):
     assert image.shape[1] == 1320 and image.shape[0] > 500
     # Every method's colour appears in the figure.
     for colour in plot.method_colors(sorted(exp["methods"], key=plot._order)).values():
-        rgb = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
+        rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
         assert (np.abs(image.astype(int) - rgb).sum(axis=2) < 10).sum() > 20, colour
     assert math.isfinite(image.mean())

@@ -12,20 +12,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_runner import ROOT, tiny_spec, write_tiny
 
 from tatl_mj import suite
-from tatl_mj.experiments import lock, records, spec as spec_mod
+from tatl_mj.experiments import lock, records
+from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.suite import bicycle, cartpole, mountain_car, pendulum
-
-from test_runner import ROOT, tiny_spec, write_tiny
 
 ENV = {**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl", "PYTHONPATH": str(ROOT)}
 linux_only = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 
 
 def tatl(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "tatl_mj.cli", *args], env=ENV, capture_output=True,
-                          text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "tatl_mj.cli", *args], env=ENV, capture_output=True, text=True, timeout=timeout
+    )
 
 
 def one_line_error(done: subprocess.CompletedProcess) -> str:
@@ -36,6 +37,7 @@ def one_line_error(done: subprocess.CompletedProcess) -> str:
 
 
 # --- processes ------------------------------------------------------------------
+
 
 def _stat(pid: int) -> tuple[int, str] | None:
     """(parent pid, state) of a live process, or None when it is gone (a zombie counts as gone)."""
@@ -80,8 +82,21 @@ def start_run(tmp_path: Path, workers: int = 2) -> tuple[subprocess.Popen, Path]
     instead of failing it.
     """
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "tatl_mj.cli", "run", str(write_tiny(tmp_path)), "--preset", "tiny",
-           "--seeds", "2", "--workers", str(workers), "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "tatl_mj.cli",
+        "run",
+        str(write_tiny(tmp_path)),
+        "--preset",
+        "tiny",
+        "--seeds",
+        "2",
+        "--workers",
+        str(workers),
+        "--out",
+        str(out),
+    ]
     with open(tmp_path / "stderr.txt", "w") as stderr:
         return subprocess.Popen(cmd, env=ENV, stdout=subprocess.DEVNULL, stderr=stderr), out
 
@@ -133,9 +148,15 @@ def test_sigterm_and_sigint_stop_cleanly_and_keep_finished_units(tmp_path, signu
 def test_second_run_into_the_same_folder_refuses_naming_the_first(tmp_path):
     out = tmp_path / "out"
     holder = subprocess.Popen(
-        [sys.executable, "-c", f"import sys, time\nfrom tatl_mj.experiments import lock\n"
-                               f"with lock.hold({str(out)!r}):\n print('held', flush=True)\n time.sleep(60)"],
-        env=ENV, stdout=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-c",
+            f"import sys, time\nfrom tatl_mj.experiments import lock\n"
+            f"with lock.hold({str(out)!r}):\n print('held', flush=True)\n time.sleep(60)",
+        ],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        text=True,
     )
     try:
         assert holder.stdout.readline().strip() == "held"
@@ -156,6 +177,7 @@ def test_second_run_into_the_same_folder_refuses_naming_the_first(tmp_path):
 
 
 # --- records ----------------------------------------------------------------------
+
 
 def test_truncated_method_record_is_moved_aside_and_named(tmp_path, caplog):
     run_dir = records.RunDirectory(tmp_path)
@@ -225,10 +247,18 @@ def test_run_recomputes_corrupt_records_and_caches(tmp_path):
 
 # --- CLI input --------------------------------------------------------------------
 
-@pytest.mark.parametrize("args, named", [
-    (["--seeds", "0"], "--seeds"), (["--seeds", "-1"], "--seeds"), (["--workers", "0"], "--workers"),
-    (["--workers", "-3"], "--workers"), (["--first-seed", "-1"], "--first-seed"), (["--seeds", "two"], "--seeds"),
-])
+
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["--seeds", "0"], "--seeds"),
+        (["--seeds", "-1"], "--seeds"),
+        (["--workers", "0"], "--workers"),
+        (["--workers", "-3"], "--workers"),
+        (["--first-seed", "-1"], "--first-seed"),
+        (["--seeds", "two"], "--seeds"),
+    ],
+)
 def test_run_refuses_bad_numbers_and_leaves_results_alone(tmp_path, args, named):
     out = tmp_path / "out"
     out.mkdir()
@@ -307,6 +337,7 @@ def test_runner_refuses_a_run_with_nothing_to_do(tmp_path):
 
 # --- suite input ------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("action", [np.zeros(2), np.zeros(10), np.zeros((1, 1)), [np.nan], [np.inf], "left"])
 def test_bicycle_refuses_actions_off_its_spec(action):
     env = suite.load("bicycle", "balance", task_kwargs={"random": 0})
@@ -337,10 +368,16 @@ def test_gridworld_time_limit_must_be_whole_steps(time_limit):
         suite.load("gridworld", "plain", task_kwargs={"time_limit": time_limit})
 
 
-@pytest.mark.parametrize("kwargs, named", [
-    ({"speed": "fast"}, "speed"), ({"cg_noise": None}, "cg_noise"), ({"speed": True}, "speed"),
-    ({"speed": -1.0}, "speed"), ({"cg_noise": float("nan")}, "cg_noise"),
-])
+@pytest.mark.parametrize(
+    "kwargs, named",
+    [
+        ({"speed": "fast"}, "speed"),
+        ({"cg_noise": None}, "cg_noise"),
+        ({"speed": True}, "speed"),
+        ({"speed": -1.0}, "speed"),
+        ({"cg_noise": float("nan")}, "cg_noise"),
+    ],
+)
 def test_bicycle_task_kwargs_are_named(kwargs, named):
     with pytest.raises(ValueError, match=named):
         suite.load("bicycle", "balance", task_kwargs=kwargs)
@@ -351,14 +388,17 @@ def test_gridworld_flags_must_be_booleans():
         suite.load("gridworld", "plain", task_kwargs={"random_start": "no"})
 
 
-@pytest.mark.parametrize("make, field", [
-    (lambda: pendulum.PendulumParams(mass="1"), "PendulumParams.mass"),
-    (lambda: pendulum.PendulumParams(length=None), "PendulumParams.length"),
-    (lambda: pendulum.PendulumParams(gravity=True), "PendulumParams.gravity"),
-    (lambda: cartpole.CartPoleParams(pole_mass=-0.1), "CartPoleParams.pole_mass"),
-    (lambda: mountain_car.MountainCarParams(damping=float("inf")), "MountainCarParams.damping"),
-    (lambda: bicycle.BicycleParams(tyre_friction="1.2"), "BicycleParams.tyre_friction"),
-])
+@pytest.mark.parametrize(
+    "make, field",
+    [
+        (lambda: pendulum.PendulumParams(mass="1"), "PendulumParams.mass"),
+        (lambda: pendulum.PendulumParams(length=None), "PendulumParams.length"),
+        (lambda: pendulum.PendulumParams(gravity=True), "PendulumParams.gravity"),
+        (lambda: cartpole.CartPoleParams(pole_mass=-0.1), "CartPoleParams.pole_mass"),
+        (lambda: mountain_car.MountainCarParams(damping=float("inf")), "MountainCarParams.damping"),
+        (lambda: bicycle.BicycleParams(tyre_friction="1.2"), "BicycleParams.tyre_friction"),
+    ],
+)
 def test_parameter_dataclasses_name_the_bad_field(make, field):
     with pytest.raises(ValueError, match=field):
         make()

@@ -59,17 +59,21 @@ def _fake_gl_libraries(directory: Path, *names: str) -> str:
 
 
 def _start(args: list[str], env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, *args], env=env, cwd=REPO, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, *args], env=env, cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
 
 
 def test_clip_written_under_egl_and_osmesa(tmp_path):
     # Both children run at once: each is mostly process start-up.
     children = {
-        backend: (tmp_path / f"{backend}.mp4", _start(
-            ["-c", CLIP_SCRIPT, str(tmp_path / f"{backend}.mp4")],
-            _child_env(MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend),
-        ))
+        backend: (
+            tmp_path / f"{backend}.mp4",
+            _start(
+                ["-c", CLIP_SCRIPT, str(tmp_path / f"{backend}.mp4")],
+                _child_env(MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend),
+            ),
+        )
         for backend in ("egl", "osmesa")
     }
     for backend, (path, child) in children.items():
@@ -97,8 +101,14 @@ def test_broken_backend_fails_with_clear_message(tmp_path, overrides, fake, expe
     env = _child_env(**overrides)
     if fake:
         env["LD_LIBRARY_PATH"] = _fake_gl_libraries(tmp_path, *fake)
-    child = subprocess.run([sys.executable, "-c", CLIP_SCRIPT, str(tmp_path / "x.mp4")],
-                           env=env, cwd=REPO, capture_output=True, text=True, timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", CLIP_SCRIPT, str(tmp_path / "x.mp4")],
+        env=env,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert child.returncode != 0
     for text in expected:
         assert text in child.stderr, child.stderr
@@ -109,8 +119,9 @@ def test_broken_backend_fails_with_clear_message(tmp_path, overrides, fake, expe
 def test_unset_backend_falls_back_to_osmesa_when_egl_is_missing(tmp_path):
     env = _child_env(LD_LIBRARY_PATH=_fake_gl_libraries(tmp_path, "EGL"))
     script = "import os; from tatl_mj import gl; print(gl.select_backend(), os.environ['PYOPENGL_PLATFORM'])"
-    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO,
-                           capture_output=True, text=True, timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
+    )
     assert child.returncode == 0, child.stderr
     assert child.stdout.split() == ["osmesa", "osmesa"]
 
@@ -120,16 +131,25 @@ def test_import_without_display_picks_a_headless_backend():
     env = _child_env()
     for key in ("DISPLAY", "WAYLAND_DISPLAY", gl.DEFAULT_MARKER):
         env.pop(key, None)
-    script = ("import os; from tatl_mj import suite; e = suite.load('cartpole', 'balance'); e.reset(); "
-              "print(os.environ['MUJOCO_GL'], e.physics.render(24, 32).shape)")
-    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
-                           timeout=120)
+    script = (
+        "import os; from tatl_mj import suite; e = suite.load('cartpole', 'balance'); e.reset(); "
+        "print(os.environ['MUJOCO_GL'], e.physics.render(24, 32).shape)"
+    )
+    child = subprocess.run(
+        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
+    )
     assert child.returncode == 0, child.stderr
     assert child.stdout.split() == ["egl", "(24,", "32,", "3)"]
     assert "DISPLAY" not in child.stderr and "Traceback" not in child.stderr, child.stderr
     # With a display, MUJOCO_GL is left to mujoco's own choice.
-    shown = subprocess.run([sys.executable, "-c", "import os, tatl_mj; print(os.environ.get('MUJOCO_GL'))"],
-                           env={**env, "DISPLAY": ":0"}, cwd=REPO, capture_output=True, text=True, timeout=60)
+    shown = subprocess.run(
+        [sys.executable, "-c", "import os, tatl_mj; print(os.environ.get('MUJOCO_GL'))"],
+        env={**env, "DISPLAY": ":0"},
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert shown.stdout.strip() == "None", shown.stderr
 
 
@@ -139,13 +159,15 @@ def test_headless_default_is_still_probed_and_falls_back(tmp_path):
     env = _child_env(MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl", LD_LIBRARY_PATH=_fake_gl_libraries(tmp_path, "EGL"))
     env[gl.DEFAULT_MARKER] = "egl"
     script = "from tatl_mj import gl; print(gl.select_backend())"
-    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
-                           timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
+    )
     assert child.returncode == 0, child.stderr
     assert child.stdout.strip() == "osmesa"
     env.pop(gl.DEFAULT_MARKER)  # the user's own MUJOCO_GL=egl is honoured, and fails clearly
-    child = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
-                           timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
+    )
     assert child.returncode != 0 and "cannot load libEGL" in child.stderr
 
 
@@ -165,6 +187,7 @@ def test_select_backend_in_a_process_where_mujoco_is_imported():
 
 
 # --- In-process rendering (EGL) -------------------------------------------------
+
 
 def _cartpole(seed: int = 0):
     return suite.load("cartpole", "balance", task_kwargs={"random": seed})
@@ -193,8 +216,7 @@ def _longest_hold(frames: np.ndarray) -> int:
 
 def test_episode_end_is_held_at_most_half_a_second_then_a_new_episode_starts():
     env = _cartpole()
-    frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
-                                   width=64, height=48)
+    frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10, width=64, height=48)
     assert frames.shape[0] == 30
     # Full force right topples the pole in well under a second, so several
     # episodes fit in 3 s; the end of each is on screen for 0.5 s (5 frames), no more.
@@ -207,8 +229,9 @@ def test_episode_end_is_held_at_most_half_a_second_then_a_new_episode_starts():
 
 def test_stop_mode_ends_the_clip_after_the_held_end():
     env = _cartpole()
-    frames = render.render_episode(env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10,
-                                   width=64, height=48, on_end="stop")
+    frames = render.render_episode(
+        env, lambda s: np.array([[20.0]]), seconds=3.0, fps=10, width=64, height=48, on_end="stop"
+    )
     ended_at = env.physics.data.time  # the episode's last step
     # Frames up to the first one at or after the end, then 4 more of the held end.
     assert frames.shape[0] == math.ceil(ended_at * 10 - 1e-9) + 1 + 4
@@ -216,11 +239,13 @@ def test_stop_mode_ends_the_clip_after_the_held_end():
 
 
 def test_overlay_names_the_episode_and_why_the_last_one_ended():
-    text = render._overlay_text(clock="t  0.40 s", method_label="ta-tl", episode_return=3.25, episode=2,
-                                previous_end="terminal state", ended="")
+    text = render._overlay_text(
+        clock="t  0.40 s", method_label="ta-tl", episode_return=3.25, episode=2, previous_end="terminal state", ended=""
+    )
     assert text == "t  0.40 s   ta-tl   return 3.2   episode 2 (episode 1: terminal state)"
-    text = render._overlay_text(clock="step  16", method_label="", episode_return=-16.0, episode=1,
-                                previous_end="", ended="terminal state")
+    text = render._overlay_text(
+        clock="step  16", method_label="", episode_return=-16.0, episode=1, previous_end="", ended="terminal state"
+    )
     assert text == "step  16   return -16.0   episode 1   [terminal state]"
 
 
@@ -243,8 +268,9 @@ def test_side_by_side_shows_source_in_mapped_state():
         return -state
 
     env, source_env = _cartpole(0), _cartpole(1)
-    frames = render.render_episode(env, _lqr_like, seconds=0.5, fps=10, width=160, height=120,
-                                   source=(source_env, mirror), camera="fixed")
+    frames = render.render_episode(
+        env, _lqr_like, seconds=0.5, fps=10, width=160, height=120, source=(source_env, mirror), camera="fixed"
+    )
     assert frames.shape == (5, 120, 320, 3)
     # Redraw the source in the mirrored final target state, independently.
     check = _cartpole(2)
@@ -313,8 +339,9 @@ def test_grid_world_is_filmed_beside_its_source():
 
     env = suite.load("gridworld", "windy", task_kwargs={"random": 0})
     plain = suite.load("gridworld", "plain", task_kwargs={"random": 0})
-    frames = render.render_episode(env, policy, seconds=5.0, fps=4, width=320, height=240,
-                                   source=(plain, lambda state: state))
+    frames = render.render_episode(
+        env, policy, seconds=5.0, fps=4, width=320, height=240, source=(plain, lambda state: state)
+    )
     assert frames.shape == (20, 240, 640, 3)
     # Goal after 16 steps (frame 16, 4 s), held 0.5 s (2 frames), then episode 2 from the start.
     first, last = frames[0], frames[16]

@@ -13,11 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tatl_mj.experiments import records, runner, spec as spec_mod
+from tatl_mj.experiments import records, runner
+from tatl_mj.experiments import spec as spec_mod
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = {"source_samples": 400, "alignment_samples": 40, "target_budgets": [40, 120],
-        "evaluation_episodes": 2, "evaluation_steps": 40}
+TINY = {
+    "source_samples": 400,
+    "alignment_samples": 40,
+    "target_budgets": [40, 120],
+    "evaluation_episodes": 2,
+    "evaluation_steps": 40,
+}
 
 
 def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs) -> spec_mod.ExperimentSpec:
@@ -51,16 +57,20 @@ def test_local_run_writes_records_and_summary(tmp_path):
         assert len(method["final_return"]) == len(method["samples_to_threshold"]) == 1
     assert exp["threshold"] is not None and exp["random_return"] is not None
     on_disk = json.loads((tmp_path / "summary.json").read_text())
-    assert on_disk["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"] == \
-        exp["methods"]["rl"]["final_return"]
+    assert (
+        on_disk["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"]
+        == exp["methods"]["rl"]["final_return"]
+    )
     assert not list(tmp_path.rglob("*.tmp"))
 
     # A rerun of the same command does no work and changes no record.
     stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "records").rglob("*.json")}
     again = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
-    assert again["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"] == \
-        exp["methods"]["rl"]["final_return"]
+    assert (
+        again["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"]
+        == exp["methods"]["rl"]["final_return"]
+    )
 
 
 def test_mixing_presets_in_one_folder_is_refused(tmp_path):
@@ -81,8 +91,21 @@ def test_a_failing_experiment_does_not_take_the_others_down(tmp_path):
 def test_killed_run_resumes_without_losing_finished_units(tmp_path):
     spec_path = write_tiny(tmp_path)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "tatl_mj.cli", "run", str(spec_path), "--preset", "tiny", "--seeds", "2",
-           "--workers", "1", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "tatl_mj.cli",
+        "run",
+        str(spec_path),
+        "--preset",
+        "tiny",
+        "--seeds",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+    ]
     env = {**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 240
@@ -168,3 +191,12 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
         states = artifacts.target_stream.states[:50]
         again = clips.clip_policy(spec, "tiny", 0, name, artifacts)
         np.testing.assert_array_equal(policy(states), again(states))
+
+
+def test_timings_break_a_run_down_by_phase(tmp_path):
+    spec = tiny_spec()
+    runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
+    table = runner.timings(tmp_path)["ip_to_flipped_ip"]
+    assert {"source_learning", "target_sampling", "mapping", "rl learn", "rl evaluate"} <= set(table)
+    assert all(seconds >= 0 for seconds in table.values()) and table["rl learn"] > 0
+    assert "ip_to_flipped_ip:" in runner.format_timings({"ip_to_flipped_ip": table})

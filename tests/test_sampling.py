@@ -21,6 +21,8 @@ ATOL = 0.0
 
 def assert_close(actual, desired, err_msg=""):
     np.testing.assert_allclose(actual, desired, rtol=0, atol=ATOL, err_msg=err_msg)
+
+
 PHYSICS_TASKS = [t for t in suite.ALL_TASKS if t[0] != "gridworld"]
 BATCHED_TASKS = [t for t in PHYSICS_TASKS if sampling.is_batched(*t)]
 
@@ -86,8 +88,7 @@ def test_contact_model_keeps_its_warm_start():
     # lockstep episode stays bit-identical only if it is carried between steps.
     kwargs = QUIET[("bicycle", "balance")]
     upright = lambda s: np.where(s[:, 2] > 0, 2, 0)  # steer into the lean  # noqa: E731
-    tr = sampling.collect("bicycle", "balance", 150, seed=2, policy=upright, task_kwargs=kwargs,
-                          n_parallel=3)
+    tr = sampling.collect("bicycle", "balance", 150, seed=2, policy=upright, task_kwargs=kwargs, n_parallel=3)
     env = suite.load("bicycle", "balance", task_kwargs={**kwargs, "random": 2})
     state = env.reset().observation["state"]
     for i in range(np.argmax(tr.last) + 1):
@@ -174,8 +175,11 @@ def test_evaluate_matches_environment_returns(domain, task):
     # environments (a model that changes every step): one per episode, seeded (7, i).
     shared = suite.load(domain, task, task_kwargs={"random": 7})
     for i in range(4):
-        env = shared if sampling.is_batched(domain, task) else suite.load(
-            domain, task, task_kwargs={"random": np.random.RandomState([7, i])})
+        env = (
+            shared
+            if sampling.is_batched(domain, task)
+            else suite.load(domain, task, task_kwargs={"random": np.random.RandomState([7, i])})
+        )
         timestep, total, steps = env.reset(), 0.0, 0
         while not timestep.last() and steps < 120:
             timestep = env.step(policy(timestep.observation["state"][None])[0])
@@ -236,10 +240,21 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
 
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
-    args = parser.parse_args([
-        "--json", "--domains", "cartpole", "--seconds", "0.05", "--memory-transitions", "3000",
-        "--fqi-transitions", "0", "--render-frames", "0",
-    ])
+    args = parser.parse_args(
+        [
+            "--json",
+            "--domains",
+            "cartpole",
+            "--seconds",
+            "0.05",
+            "--memory-transitions",
+            "3000",
+            "--fqi-transitions",
+            "0",
+            "--render-frames",
+            "0",
+        ]
+    )
     assert bench.run(args) == 0
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     paths = {r["path"] for r in records if r["kind"] == "steps"}
@@ -252,8 +267,7 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     if has_gymnasium:
         peer = next(r for r in records if r.get("path") == "gymnasium")
         assert peer["env_id"] == "CartPole-v1" and peer["steps"] >= 100
-        assert summary["sampler_vs_gymnasium"] == pytest.approx(
-            summary["sampler_steps_per_s"] / peer["steps_per_s"])
+        assert summary["sampler_vs_gymnasium"] == pytest.approx(summary["sampler_steps_per_s"] / peer["steps_per_s"])
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
 
@@ -266,10 +280,20 @@ def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch)
     monkeypatch.setitem(sys.modules, "gymnasium", None)  # import gymnasium now raises ImportError
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
-    args = parser.parse_args([
-        "--domains", "pendulum", "--seconds", "0.05", "--memory-transitions", "0",
-        "--fqi-transitions", "0", "--render-frames", "0",
-    ])
+    args = parser.parse_args(
+        [
+            "--domains",
+            "pendulum",
+            "--seconds",
+            "0.05",
+            "--memory-transitions",
+            "0",
+            "--fqi-transitions",
+            "0",
+            "--render-frames",
+            "0",
+        ]
+    )
     assert bench.run(args) == 0
     out = capsys.readouterr().out
     assert "gymnasium for pendulum: skipped (gymnasium is not installed" in out

@@ -104,26 +104,45 @@ def test_variant_specs_load(path):
     "edit, key, needle",
     [
         # the examples: typos inside feature tables used to load and fail in a worker
-        (lambda t: t["methods"]["uma-tl"]["features"].__setitem__("centres", 100), "methods.uma-tl",
-         "unknown keys ['centres']"),
-        (lambda t: t["methods"]["ta-tl"]["apprentice"].__setitem__("kind", "polynomial"), "methods.ta-tl",
-         "features kind 'polynomial' is unknown"),
-        (lambda t: t["source_learning"]["features"].__setitem__("centres", 100), "source_learning.features",
-         "unknown keys ['centres']"),
+        (
+            lambda t: t["methods"]["uma-tl"]["features"].__setitem__("centres", 100),
+            "methods.uma-tl",
+            "unknown keys ['centres']",
+        ),
+        (
+            lambda t: t["methods"]["ta-tl"]["apprentice"].__setitem__("kind", "polynomial"),
+            "methods.ta-tl",
+            "features kind 'polynomial' is unknown",
+        ),
+        (
+            lambda t: t["source_learning"]["features"].__setitem__("centres", 100),
+            "source_learning.features",
+            "unknown keys ['centres']",
+        ),
         # a setting the choice ignores is refused
-        (lambda t: t["methods"]["rl"].update(regressor="extra_trees"), "methods.rl",
-         "RL.features applies to regressor 'linear' only"),
-        (lambda t: t["source_learning"].update(regressor="extra_trees", ridge=1.0), "source_learning.ridge",
-         "applies to regressor 'linear' only"),
+        (
+            lambda t: t["methods"]["rl"].update(regressor="extra_trees"),
+            "methods.rl",
+            "RL.features applies to regressor 'linear' only",
+        ),
+        (
+            lambda t: t["source_learning"].update(regressor="extra_trees", ridge=1.0),
+            "source_learning.ridge",
+            "applies to regressor 'linear' only",
+        ),
         (lambda t: t["methods"]["ta-tl"].__setitem__("zeeta", 0.1), "methods.ta-tl", "valid settings"),
         (lambda t: t["methods"].__setitem__("ta-tll", {}), "methods.ta-tll", "valid methods"),
         (lambda t: t["methods"]["ta-tl"].__setitem__("zeta", -0.5), "methods.ta-tl", "TATL.zeta must be in"),
         (lambda t: t.__setitem__("name", "../../escape"), "name", "it names a folder"),
         (lambda t: t["target"].__setitem__("task_kwargs", {"wind": 1}), "target.task_kwargs", "valid"),
-        (lambda t: t["source_learning"].__setitem__("method", "q_iteration"), "source_learning.method",
-         "known model"),
-        (lambda t: t["mapping"].__setitem__("kind", "identity") or t["target"].update(domain="cartpole", task="balance"),
-         "mapping.kind", "equal state sizes"),
+        (lambda t: t["source_learning"].__setitem__("method", "q_iteration"), "source_learning.method", "known model"),
+        (
+            lambda t: (
+                t["mapping"].__setitem__("kind", "identity") or t["target"].update(domain="cartpole", task="balance")
+            ),
+            "mapping.kind",
+            "equal state sizes",
+        ),
     ],
 )
 def test_spec_errors_name_the_key_path(edit, key, needle):

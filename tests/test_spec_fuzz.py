@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 from tatl_mj.experiments import spec as spec_mod  # noqa: E402
 
@@ -19,8 +20,14 @@ VALID = [tomllib.loads(p.read_text()) for p in SPEC_FILES]
 
 # Every value TOML can hold.
 scalars = st.one_of(
-    st.booleans(), st.integers(min_value=-(2**63), max_value=2**63 - 1), st.floats(), st.text(max_size=12),
-    st.dates(), st.times(), st.datetimes(), st.datetimes(timezones=st.just(datetime.timezone.utc)),
+    st.booleans(),
+    st.integers(min_value=-(2**63), max_value=2**63 - 1),
+    st.floats(),
+    st.text(max_size=12),
+    st.dates(),
+    st.times(),
+    st.datetimes(),
+    st.datetimes(timezones=st.just(datetime.timezone.utc)),
 )
 keys = st.text(min_size=1, max_size=10)
 values = st.recursive(
@@ -84,15 +91,17 @@ def test_random_tables_load_or_raise_spec_error(table):
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.one_of(
-    st.binary(max_size=200),
-    st.text(max_size=200).map(str.encode),
-    # Real spec text cut short or with a line dropped: TOML that is nearly right.
-    st.tuples(st.sampled_from(SPEC_FILES), st.integers(0, 4000)).map(lambda t: t[0].read_bytes()[: t[1]]),
-    st.tuples(st.sampled_from(SPEC_FILES), st.integers(0, 80)).map(
-        lambda t: b"\n".join(line for i, line in enumerate(t[0].read_bytes().splitlines()) if i != t[1])
-    ),
-))
+@given(
+    st.one_of(
+        st.binary(max_size=200),
+        st.text(max_size=200).map(str.encode),
+        # Real spec text cut short or with a line dropped: TOML that is nearly right.
+        st.tuples(st.sampled_from(SPEC_FILES), st.integers(0, 4000)).map(lambda t: t[0].read_bytes()[: t[1]]),
+        st.tuples(st.sampled_from(SPEC_FILES), st.integers(0, 80)).map(
+            lambda t: b"\n".join(line for i, line in enumerate(t[0].read_bytes().splitlines()) if i != t[1])
+        ),
+    )
+)
 def test_random_files_load_or_raise_spec_error(data):
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "fuzz.toml"

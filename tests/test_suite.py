@@ -53,6 +53,7 @@ def test_suite_lists_every_domain_and_task():
 
 # --- dm_env conformance: one generated TestCase per task -----------------------
 
+
 def _dm_env_case(domain, task):
     class Case(test_utils.EnvironmentTestMixin, absltest.TestCase):
         def make_object_under_test(self):
@@ -79,6 +80,7 @@ del _domain, _task, _name, _case
 
 # --- gymnasium through shimmy -----------------------------------------------------
 
+
 @pytest.mark.filterwarnings("ignore:.*(Box observation space|symmetric and normalized).*:UserWarning")
 # shimmy's DmControlCompatibilityV0 needs dm_control's physics and task; the grid
 # world is a plain dm_env.Environment (its dm_env contract is checked above).
@@ -93,6 +95,7 @@ def test_gymnasium_check_env(domain, task):
 
 
 # --- seeding --------------------------------------------------------------------
+
 
 def _trace(domain, task, seed, n=25):
     extra = {"random_start": True} if _accepts(domain, task, "random_start") else {}
@@ -118,6 +121,7 @@ def test_same_seed_same_run_and_seeds_differ_at_start(domain, task):
 
 
 # --- rendering ------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("domain, task", PHYSICS_TASKS, ids=PHYSICS_IDS)
 def test_start_configurations_are_successive_resets(domain, task):
@@ -147,6 +151,7 @@ def test_renders_a_frame_from_the_tracking_camera(domain, task):
 
 
 # --- argument checking ------------------------------------------------------------
+
 
 def test_load_rejects_unknown_names_listing_the_valid_ones():
     with pytest.raises(ValueError, match="valid domains.*cartpole"):
@@ -188,6 +193,7 @@ def test_discrete_action_values():
 
 
 # --- divergence -------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("domain, task", PHYSICS_TASKS, ids=PHYSICS_IDS)
 def test_divergence_ends_the_episode_cleanly(domain, task):

@@ -37,17 +37,23 @@ def experiment(methods: dict, random_returns: dict) -> dict:
     """A summary experiment from {method: {seed: [return per budget]}} at budgets 100, 1000."""
     return {
         "methods": {
-            m: {"seeds": sorted(runs), "final_return": [runs[s][-1] for s in sorted(runs)],
-                "curve": {"samples": [100, 1000], "mean_return": [runs[s] for s in sorted(runs)]}}
+            m: {
+                "seeds": sorted(runs),
+                "final_return": [runs[s][-1] for s in sorted(runs)],
+                "curve": {"samples": [100, 1000], "mean_return": [runs[s] for s in sorted(runs)]},
+            }
             for m, runs in methods.items()
         },
-        "source_seeds": sorted(random_returns), "random_returns": [random_returns[s] for s in sorted(random_returns)],
+        "source_seeds": sorted(random_returns),
+        "random_returns": [random_returns[s] for s in sorted(random_returns)],
     }
 
 
 def test_compare_uses_only_shared_seeds():
-    exp = experiment({"a": {0: [0, 10], 1: [10, 10]}, "b": {0: [0, 2], 1: [0, 4], 2: [50, 50]}},
-                     random_returns={0: 0.0, 1: 2.0, 2: 100.0})
+    exp = experiment(
+        {"a": {0: [0, 10], 1: [10, 10]}, "b": {0: [0, 2], 1: [0, 4], 2: [50, 50]}},
+        random_returns={0: 0.0, 1: 2.0, 2: 100.0},
+    )
     c = summary.compare(exp)
     assert c.seeds == (0, 1) and c.seed_sets_differ
     assert c.random_return == pytest.approx(1.0)  # seed 2's source is not compared either

@@ -8,12 +8,14 @@ from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping, Mapping, 
 
 def _known_map() -> np.ndarray:
     """A = permutation @ scaling @ rotation (30, -50, 70 degrees about x, y, z)."""
+
     def rot(axis, deg):
         c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
         i, j = [k for k in range(3) if k != axis]
         r = np.eye(3)
         r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
         return r
+
     rotation = rot(2, 70) @ rot(1, -50) @ rot(0, 30)
     return np.eye(3)[[2, 0, 1]] @ np.diag([2.0, 0.5, 1.0]) @ rotation
 

@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 
 from tatl_mj.transfer.alignment import (
-    AffineMapping, Mapping, TransitionAlignment, align_manifolds, align_transitions, dynamics_consistency,
+    AffineMapping,
+    Mapping,
+    TransitionAlignment,
+    align_manifolds,
+    align_transitions,
+    dynamics_consistency,
 )
 from tatl_mj.transfer.coordinates import Coordinates, InCoordinates
 from tatl_mj.transfer.features import wrap_angle
@@ -97,8 +102,9 @@ def test_bad_input_names_the_field(problem):
         align_transitions(source, target, 3, 3, target_periodic=(True, False))
     with pytest.raises(ValueError, match="settings must be a TransitionAlignment"):
         align_transitions(source, target, 3, 3, settings={"mu": 1.0})
-    bad = Transitions(target.states, target.actions + 5, target.rewards, target.next_states,
-                      target.absorbing, target.last)
+    bad = Transitions(
+        target.states, target.actions + 5, target.rewards, target.next_states, target.absorbing, target.last
+    )
     with pytest.raises(ValueError, match="target.actions"):
         align_transitions(source, bad, 3, 3)
 

@@ -121,8 +121,10 @@ def test_recovers_w_and_b_of_a_wrapped_angle_where_the_plain_fit_fails():
     err = np.abs(app.difference(app.predict(s, a), s_next)).max()
     plain_err = np.abs(app.difference(plain.predict(s, a), s_next)).max()
     db, dw, plain_db = np.abs(app.B - b_true).max(), np.abs(app.W - w_true).max(), np.abs(plain.B - b_true).max()
-    print(f"crossing {crossing.mean():.3f}; periodic |dB| {db:.2e} |dW| {dw:.2e} pred {err:.2e}; "
-          f"plain |dB| {plain_db:.2e} pred {plain_err:.2e}")
+    print(
+        f"crossing {crossing.mean():.3f}; periodic |dB| {db:.2e} |dW| {dw:.2e} pred {err:.2e}; "
+        f"plain |dB| {plain_db:.2e} pred {plain_err:.2e}"
+    )
     assert db < 1e-3 and dw < 2e-2 and err < 1e-2
     assert plain_db > 0.05 and plain_err > 1.0
     assert app.periodic == (True, False) and plain.periodic is None

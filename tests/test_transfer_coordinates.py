@@ -16,10 +16,14 @@ ENERGY = AffineMapping(np.diag([3.0, 1.0 / 0.0094]), np.array([PI / 2.0, 0.0]))
 
 def test_to_mapping_recentres_at_the_origin_and_wraps():
     states = np.array([[PI - 0.1, 1.0], [-PI + 0.1, -2.0], [0.0, 3.0], [-PI, 0.5]])
-    np.testing.assert_allclose(HANGING.to_mapping(states), [[-0.1, 1.0], [0.1, -2.0], [-PI, 3.0], [0.0, 0.5]],
-                               atol=1e-12)
-    np.testing.assert_allclose(HANGING.from_mapping([[-0.1, 1.0], [0.1, -2.0], [4.0, 0.0]]),
-                               [[PI - 0.1, 1.0], [-PI + 0.1, -2.0], [4.0 - PI, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(
+        HANGING.to_mapping(states), [[-0.1, 1.0], [0.1, -2.0], [-PI, 3.0], [0.0, 0.5]], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        HANGING.from_mapping([[-0.1, 1.0], [0.1, -2.0], [4.0, 0.0]]),
+        [[PI - 0.1, 1.0], [-PI + 0.1, -2.0], [4.0 - PI, 0.0]],
+        atol=1e-12,
+    )
     np.testing.assert_array_equal(Coordinates.plain(2).to_mapping([[7.0, -9.0]]), [[7.0, -9.0]])
 
 
@@ -53,8 +57,9 @@ def test_both_sides_periodic_round_trip():
     source = Coordinates((True, False), (0.5, 0.0))
     mapping = InCoordinates(IdentityMapping(), source, HANGING)
     np.testing.assert_allclose(mapping.chi([[0.5, 2.0]]), [[-PI, 2.0]], atol=1e-12)
-    np.testing.assert_allclose(mapping.chi_plus(mapping.chi([[1.0, 2.0], [-3.0, 1.0]])), [[1.0, 2.0], [-3.0, 1.0]],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        mapping.chi_plus(mapping.chi([[1.0, 2.0], [-3.0, 1.0]])), [[1.0, 2.0], [-3.0, 1.0]], atol=1e-12
+    )
 
 
 def test_step_and_transitions_in_mapping_coordinates():
@@ -111,7 +116,13 @@ def test_align_in_coordinates_recovers_a_map_across_the_hanging_cut():
     target = batch(rng.normal(size=(n, 2)) * [0.3, 1.5], rng.integers(3, size=n), pendulum)
     assert np.mean(np.abs(target.next_states[:, 0] - target.states[:, 0]) > PI) > 0.05
     mapping, record = align_in_coordinates(
-        source, target, Coordinates.plain(2), HANGING, 3, 3, settings=TransitionAlignment(sign_flips=False),
+        source,
+        target,
+        Coordinates.plain(2),
+        HANGING,
+        3,
+        3,
+        settings=TransitionAlignment(sign_flips=False),
     )
     x = rng.normal(size=(200, 2)) * [0.3, 1.5]
     np.testing.assert_allclose(mapping.chi(x), pendulum(x), atol=1e-9)

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from test_transfer_method import _problem, _samples
+from test_transfer_tabular import GAMMA, one_visit_per_pair
 
 from tatl_mj import suite
 from tatl_mj.transfer import registry
@@ -10,8 +12,6 @@ from tatl_mj.transfer.fqi import q_iteration
 from tatl_mj.transfer.horizon import HorizonTATL, HorizonTATLPolicy
 from tatl_mj.transfer.method import TATL, ProjectedSource, TransferProblem
 from tatl_mj.transfer.tabular import OneStepOracle, ReplanPolicy, ReplanTATL
-from test_transfer_method import _problem, _samples
-from test_transfer_tabular import GAMMA, one_visit_per_pair
 
 
 def test_horizon_method_with_one_step_is_the_papers_rule():
@@ -29,9 +29,11 @@ def test_registered_ablations_fix_their_settings():
     assert upright.reference == "zero" and upright.name == "apprentice-upright"
     with pytest.raises(ValueError, match="unknown setting 'reference'"):
         registry.build("apprentice-upright", {"reference": "source"})
+
     # The zero reference never queries the source: a problem whose source parts fail still works.
     def no_source(*_):
         raise AssertionError("the source was queried")
+
     problem = _problem(source_step=no_source)
     action = upright.learn(problem, _samples())(np.zeros((3, 2)))
     assert action.shape == (3, 1)
@@ -39,17 +41,23 @@ def test_registered_ablations_fix_their_settings():
     assert not registry.build("ta-tl-h-oracle").uses_samples and not ProjectedSource().uses_samples
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: HorizonTATL(horizon=0), "HorizonTATL.horizon must be an integer >= 1"),
-    (lambda: HorizonTATL(reference="upright"), r"HorizonTATL.reference is 'upright'; valid choices: \['source', 'zero'\]"),
-    (lambda: HorizonTATL(model="simulator"), "HorizonTATL.model is 'simulator'"),
-    (lambda: HorizonTATL(weights=(0.0, 0.0)), "HorizonTATL.weights must be numbers >= 0, not all 0"),
-    (lambda: HorizonTATL(step_ratio=-2.0), "HorizonTATL.step_ratio must be a number > 0"),
-    (lambda: HorizonTATL(adaptive_actions=(1.0,)), "adaptive_actions is not supported"),
-    (lambda: ReplanTATL(prior_scope="everywhere"), "ReplanTATL.prior_scope is 'everywhere'"),
-    (lambda: ReplanTATL(data="oracle"), "ReplanTATL.data is 'oracle'"),
-    (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be in \[0, 1\)"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: HorizonTATL(horizon=0), "HorizonTATL.horizon must be an integer >= 1"),
+        (
+            lambda: HorizonTATL(reference="upright"),
+            r"HorizonTATL.reference is 'upright'; valid choices: \['source', 'zero'\]",
+        ),
+        (lambda: HorizonTATL(model="simulator"), "HorizonTATL.model is 'simulator'"),
+        (lambda: HorizonTATL(weights=(0.0, 0.0)), "HorizonTATL.weights must be numbers >= 0, not all 0"),
+        (lambda: HorizonTATL(step_ratio=-2.0), "HorizonTATL.step_ratio must be a number > 0"),
+        (lambda: HorizonTATL(adaptive_actions=(1.0,)), "adaptive_actions is not supported"),
+        (lambda: ReplanTATL(prior_scope="everywhere"), "ReplanTATL.prior_scope is 'everywhere'"),
+        (lambda: ReplanTATL(data="oracle"), "ReplanTATL.data is 'oracle'"),
+        (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be in \[0, 1\)"),
+    ],
+)
 def test_extension_settings_are_checked(make, message):
     with pytest.raises(ValueError, match=message):
         make()
@@ -68,10 +76,12 @@ def _grid_problem(**hooks):
 
     def source_step(states, actions):
         from tatl_mj import sampling
+
         return sampling.step_from("gridworld", "plain", states, actions)
 
-    return TransferProblem(source_q=source_q, mapping=IdentityMapping(), source_step=source_step,
-                           source=plain, target=windy, **hooks)
+    return TransferProblem(
+        source_q=source_q, mapping=IdentityMapping(), source_step=source_step, source=plain, target=windy, **hooks
+    )
 
 
 def test_replan_through_the_problem_is_optimal_with_full_data():

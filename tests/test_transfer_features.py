@@ -75,6 +75,7 @@ def test_bad_bandwidth_and_nan_states_raise():
 
 # --- Periodic (angle) coordinates -------------------------------------------------------
 
+
 def test_periodic_rbf_measures_the_wrapped_distance_across_pi():
     """A centre at theta = pi - 0.1 and a state at -pi + 0.2 are 0.3 apart on the circle:
     phi = exp(-0.3^2 / (2 sigma^2)) exactly; the plain RBF sees them 2 pi - 0.3 apart."""
@@ -143,8 +144,14 @@ def test_periodic_linear_features_use_sin_and_cos():
 
 
 def test_make_features_accepts_periodic_and_names_bad_masks():
-    spec = {"kind": "rbf", "centers": 100, "low": [-3.14159, -8], "high": [3.14159, 8],
-            "sigma": [0.6, 1.5], "periodic": [True, False]}
+    spec = {
+        "kind": "rbf",
+        "centers": 100,
+        "low": [-3.14159, -8],
+        "high": [3.14159, 8],
+        "sigma": [0.6, 1.5],
+        "periodic": [True, False],
+    }
     rbf = make_features(spec, 2)
     assert isinstance(rbf, RBF) and rbf.periodic == (True, False) and rbf.size(2) == 101
     assert not np.any(np.isclose(rbf.centers[:, 0], 3.14159))  # no duplicate of -pi at +pi

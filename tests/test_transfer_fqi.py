@@ -6,7 +6,12 @@ import scipy.linalg
 
 from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot
 from tatl_mj.transfer.fqi import (
-    ExtraTreesRegressor, LinearRegressor, TabularQ, fitted_q_iteration, make_regressor, q_iteration,
+    ExtraTreesRegressor,
+    LinearRegressor,
+    TabularQ,
+    fitted_q_iteration,
+    make_regressor,
+    q_iteration,
 )
 from tatl_mj.transitions import Transitions
 
@@ -152,8 +157,14 @@ def test_degenerate_input_raises_clear_errors():
 
 
 def test_make_regressor_from_spec():
-    reg = make_regressor({"kind": "linear", "features": {"kind": "rbf", "centers": 20, "low": [-1, -1],
-                                                         "high": [1, 1], "sigma": [1.2, 1.2]}, "ridge": 1e-4}, 2)
+    reg = make_regressor(
+        {
+            "kind": "linear",
+            "features": {"kind": "rbf", "centers": 20, "low": [-1, -1], "high": [1, 1], "sigma": [1.2, 1.2]},
+            "ridge": 1e-4,
+        },
+        2,
+    )
     assert isinstance(reg, LinearRegressor) and reg.ridge == 1e-4 and reg.features.size(2) == 21
     trees = make_regressor({"kind": "extra_trees", "seed": 3}, 2)
     assert trees == ExtraTreesRegressor(50, 5, 2, 3)

@@ -61,8 +61,9 @@ def _pair(apprentice, low=-50.0, high=50.0, **horizon_kwargs):
     one_step = TATLPolicy(
         common["source_q"], CHI, source_step, apprentice, SOURCE_ACTIONS, common["target_actions"], [low], [high]
     )
-    horizon = HorizonTATLPolicy(apprentice.predict, [low], [high], periodic=apprentice.periodic,
-                                **{**common, **horizon_kwargs})
+    horizon = HorizonTATLPolicy(
+        apprentice.predict, [low], [high], periodic=apprentice.periodic, **{**common, **horizon_kwargs}
+    )
     return one_step, horizon
 
 
@@ -101,10 +102,12 @@ def test_one_step_horizon_is_algorithm_1_across_the_wrap():
     states = np.column_stack([np.random.default_rng(7).uniform(2.9, 3.4, 40), np.linspace(-1, 1, 40)])
     states[:, 0] = wrap_angle(states[:, 0])
     kwargs = dict(source_q=_AngleQ(), mapping=identity, source_step=wrapped_source_step, target_actions=SOURCE_ACTIONS)
-    one_step = TATLPolicy(kwargs["source_q"], identity, wrapped_source_step, apprentice, SOURCE_ACTIONS,
-                          SOURCE_ACTIONS, [-100.0], [100.0])
-    horizon = HorizonTATLPolicy(apprentice.predict, [-100.0], [100.0], weights=np.ones(2),
-                                periodic=apprentice.periodic, **kwargs)
+    one_step = TATLPolicy(
+        kwargs["source_q"], identity, wrapped_source_step, apprentice, SOURCE_ACTIONS, SOURCE_ACTIONS, [-100.0], [100.0]
+    )
+    horizon = HorizonTATLPolicy(
+        apprentice.predict, [-100.0], [100.0], weights=np.ones(2), periodic=apprentice.periodic, **kwargs
+    )
     expected, got = one_step.step(states), horizon.step(states)
     raw = expected.s_hat_T_next[:, 0] - apprentice.predict(states, expected.a_T)[:, 0]
     assert np.abs(raw).max() > 6.0 and np.abs(expected.pi_ad[:, 0]).max() < 1.0  # gaps crossed the wrap
@@ -162,8 +165,16 @@ def _integrator_apprentice():
 
 
 def _goal_policy(model, **kwargs):
-    return HorizonTATLPolicy(model, [-5.0], [5.0], source_q=GoalQ(), mapping=POSITION, source_step=goal_step,
-                             target_actions=SOURCE_ACTIONS, **kwargs)
+    return HorizonTATLPolicy(
+        model,
+        [-5.0],
+        [5.0],
+        source_q=GoalQ(),
+        mapping=POSITION,
+        source_step=goal_step,
+        target_actions=SOURCE_ACTIONS,
+        **kwargs,
+    )
 
 
 def _closed_loop(policy, steps):
@@ -239,8 +250,7 @@ def test_zero_reference_regulates_an_unstable_system():
     def model(s, a):
         return s @ UNSTABLE_A.T + a @ UNSTABLE_B.T
 
-    policy = HorizonTATLPolicy(model, [-100.0], [100.0], horizon=10, weights=np.array([1.0, 0.01]),
-                               reference="zero")
+    policy = HorizonTATLPolicy(model, [-100.0], [100.0], horizon=10, weights=np.array([1.0, 0.01]), reference="zero")
     gain = -policy(np.eye(2))  # rows: the action at each unit state
     states = np.random.default_rng(4).normal(size=(5, 2))
     np.testing.assert_allclose(policy(states), -states @ gain, rtol=1e-9, atol=1e-12)
@@ -258,6 +268,7 @@ def test_zero_reference_regulates_an_unstable_system():
 
 # --- Bad input ------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -274,8 +285,15 @@ def test_zero_reference_regulates_an_unstable_system():
     ],
 )
 def test_rejects_bad_settings(kwargs, match):
-    base = dict(model=integrator_step, target_low=[-5.0], target_high=[5.0], source_q=GoalQ(), mapping=POSITION,
-                source_step=goal_step, target_actions=SOURCE_ACTIONS)
+    base = dict(
+        model=integrator_step,
+        target_low=[-5.0],
+        target_high=[5.0],
+        source_q=GoalQ(),
+        mapping=POSITION,
+        source_step=goal_step,
+        target_actions=SOURCE_ACTIONS,
+    )
     with pytest.raises(ValueError, match=match):
         HorizonTATLPolicy(**{**base, **kwargs})
 

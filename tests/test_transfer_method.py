@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.baselines import MappedQ, rl, uma_tl
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor
-from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.method import RL, TATL, UMATL, TransferMethod, TransferProblem
 from tatl_mj.transfer.registry import METHODS, build
 from tatl_mj.transfer.tatl import TATLPolicy
@@ -39,17 +39,26 @@ def _samples(n=400, seed=0):
 
 def _description(actions, discrete=False, low=-3.0, high=3.0):
     return TaskDescription(
-        domain="toy", task="t", state_names=("x", "v"), periodic=(False, False), action_values=actions,
-        discrete=discrete, control_timestep=0.1,
-        action_low=None if discrete else [low], action_high=None if discrete else [high],
+        domain="toy",
+        task="t",
+        state_names=("x", "v"),
+        periodic=(False, False),
+        action_values=actions,
+        discrete=discrete,
+        control_timestep=0.1,
+        action_low=None if discrete else [low],
+        action_high=None if discrete else [high],
     )
 
 
 def _problem(target_discrete=False, **overrides):
     kwargs = dict(
-        source_q=SourceQ(), mapping=IdentityMapping(),
+        source_q=SourceQ(),
+        mapping=IdentityMapping(),
         source_step=lambda x, i: x + 0.1 * np.stack([x[:, 1], ACTIONS[i, 0]], axis=1),
-        source=_description(ACTIONS), target=_description(2 * ACTIONS, discrete=target_discrete), seed=0,
+        source=_description(ACTIONS),
+        target=_description(2 * ACTIONS, discrete=target_discrete),
+        seed=0,
     )
     kwargs.update(overrides)
     return TransferProblem(**kwargs)
@@ -75,17 +84,20 @@ def test_registry_and_protocol():
     assert isinstance(MyMethod(), TransferMethod)
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: TATL(zeta=-1.0), r"TATL.zeta must be in \(0.0"),
-    (lambda: TATL(apprentice={"kind": "polynomial"}), "TATL.apprentice: features kind 'polynomial' is unknown"),
-    (lambda: TATL(apprentice={"kind": "rbf", "centres": 100, "sigma": [1.0]}), "unknown keys \\['centres'\\]"),
-    (lambda: TATL(batch=0), "TATL.batch must be in"),
-    (lambda: UMATL(regressor="svm"), r"UMATL.regressor is 'svm'; valid choices: \['linear', 'extra_trees'\]"),
-    (lambda: RL(regressor="extra_trees", ridge=1.0), "RL.ridge applies to regressor 'linear' only"),
-    (lambda: RL(regressor="extra_trees", features={"kind": "linear"}), "RL.features applies to regressor 'linear'"),
-    (lambda: RL(gamma=1.0), "RL.gamma must be in"),
-    (lambda: UMATL(iterations=2.5), "UMATL.iterations must be an integer"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: TATL(zeta=-1.0), r"TATL.zeta must be in \(0.0"),
+        (lambda: TATL(apprentice={"kind": "polynomial"}), "TATL.apprentice: features kind 'polynomial' is unknown"),
+        (lambda: TATL(apprentice={"kind": "rbf", "centres": 100, "sigma": [1.0]}), "unknown keys \\['centres'\\]"),
+        (lambda: TATL(batch=0), "TATL.batch must be in"),
+        (lambda: UMATL(regressor="svm"), r"UMATL.regressor is 'svm'; valid choices: \['linear', 'extra_trees'\]"),
+        (lambda: RL(regressor="extra_trees", ridge=1.0), "RL.ridge applies to regressor 'linear' only"),
+        (lambda: RL(regressor="extra_trees", features={"kind": "linear"}), "RL.features applies to regressor 'linear'"),
+        (lambda: RL(gamma=1.0), "RL.gamma must be in"),
+        (lambda: UMATL(iterations=2.5), "UMATL.iterations must be an integer"),
+    ],
+)
 def test_settings_are_checked_in_the_constructor(make, message):
     with pytest.raises(ValueError, match=message):
         make()
@@ -130,8 +142,9 @@ def test_uma_tl_starts_from_the_mapped_source_q():
     """Zero target rewards and one iteration: Q_1(., a) is the least-squares fit of
     gamma * max_b Q_S(chi_plus(s'), b) (= gamma |s'_0|) on action a's samples."""
     samples = _samples()
-    zero = Transitions(samples.states, samples.actions, np.zeros(len(samples)), samples.next_states,
-                       samples.absorbing, samples.last)
+    zero = Transitions(
+        samples.states, samples.actions, np.zeros(len(samples)), samples.next_states, samples.absorbing, samples.last
+    )
     reg = LinearRegressor(LinearFeatures(), ridge=0.0)
     q = uma_tl(SourceQ(), IdentityMapping(), zero, 3, reg, 0.5, 1)
     target = 0.5 * MappedQ(SourceQ(), IdentityMapping()).values(zero.next_states).max(axis=1)
@@ -150,5 +163,12 @@ def test_problem_validation():
     with pytest.raises(ValueError, match="Assumption 1"):
         _problem(target=_description(np.array([[1.0], [2.0]])))
     with pytest.raises(ValueError, match="action_low/action_high are required"):
-        TaskDescription(domain="toy", task="t", state_names=("x",), periodic=(False,),
-                        action_values=ACTIONS, discrete=False, control_timestep=0.1)
+        TaskDescription(
+            domain="toy",
+            task="t",
+            state_names=("x",),
+            periodic=(False,),
+            action_values=ACTIONS,
+            discrete=False,
+            control_timestep=0.1,
+        )

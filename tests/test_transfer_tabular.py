@@ -37,9 +37,14 @@ def one_visit_per_pair(windy: bool = True) -> Transitions:
             env.reset()
             env.set_state_vector(cell.astype(float))
             timestep = env.step(a)
-            for key, value in (("states", cell), ("actions", a), ("rewards", timestep.reward),
-                               ("next_states", timestep.observation["state"]),
-                               ("absorbing", timestep.discount == 0.0), ("last", timestep.last())):
+            for key, value in (
+                ("states", cell),
+                ("actions", a),
+                ("rewards", timestep.reward),
+                ("next_states", timestep.observation["state"]),
+                ("absorbing", timestep.discount == 0.0),
+                ("last", timestep.last()),
+            ):
                 rows[key].append(value)
     return Transitions(**{k: np.asarray(v) for k, v in rows.items()})
 
@@ -87,8 +92,9 @@ def test_apprentice_reproduces_the_windy_grid_after_one_visit_per_pair():
 
 def test_apprentice_mode_ties_and_fallback():
     cells = tabular.CellMap(np.arange(4)[:, None])
-    prior = tabular.TabularModel(np.array([[3, 2], [1, 1], [2, 2], [3, 3]]), np.full((4, 2), 7.0),
-                                 np.zeros((4, 2), bool))
+    prior = tabular.TabularModel(
+        np.array([[3, 2], [1, 1], [2, 2], [3, 3]]), np.full((4, 2), 7.0), np.zeros((4, 2), bool)
+    )
     # (0, 0) -> 1, 1, 2: the mode 1, its reward the mean of the two landings on 1, absorbing by majority.
     # (0, 1) -> 1, 2: a tie, resolved to the prior's 2; (1, 0) -> 0, 3: tie, prior 1 absent, lowest 0.
     # (2, 0) -> 2 with reward 7: what the prior says.
@@ -139,8 +145,9 @@ def test_replanner_with_the_exact_model_is_optimal_from_every_start():
 def test_replanner_falls_back_to_the_prior_where_no_data_exist():
     data = one_visit_per_pair()
     seen = data.states[:, 1] >= 6  # target data only in columns 6..9
-    part = Transitions(*(getattr(data, f)[seen] for f in
-                         ("states", "actions", "rewards", "next_states", "absorbing", "last")))
+    part = Transitions(
+        *(getattr(data, f)[seen] for f in ("states", "actions", "rewards", "next_states", "absorbing", "last"))
+    )
     policy = tabular.replan(tabular.fit_tabular_apprentice(part, CELLS, SOURCE), CELLS, GAMMA, len(part))
     east = (CELLS.cells[:, 1] >= 6) & (np.arange(CELLS.n_cells) != GOAL)
     assert np.array_equal(policy.visited, np.repeat(east[:, None], 4, axis=1))
@@ -153,14 +160,18 @@ def test_replanner_falls_back_to_the_prior_where_no_data_exist():
     empty = part.head(0)
     np.testing.assert_allclose(
         tabular.replan(tabular.fit_tabular_apprentice(empty, CELLS, SOURCE), CELLS, GAMMA).q.q,
-        q_iteration(*PLAIN[:3], GAMMA).q, atol=1e-9)
+        q_iteration(*PLAIN[:3], GAMMA).q,
+        atol=1e-9,
+    )
     blank = tabular.fit_tabular_apprentice(empty, CELLS, tabular.uninformed_model(CELLS.n_cells, 4))
     assert np.array_equal(tabular.replan(blank, CELLS, GAMMA).q.q, np.zeros((CELLS.n_cells, 4)))
 
 
 def test_mapped_model_translates_cells_through_the_mapping():
-    assert all(np.array_equal(getattr(tabular.mapped_model(SOURCE, CELLS, CELLS, IdentityMapping()), f),
-                              getattr(SOURCE, f)) for f in ("next_state", "reward", "absorbing"))
+    assert all(
+        np.array_equal(getattr(tabular.mapped_model(SOURCE, CELLS, CELLS, IdentityMapping()), f), getattr(SOURCE, f))
+        for f in ("next_state", "reward", "absorbing")
+    )
     # The target lists the same cells shifted by (10, 20) and in reverse order.
     order = np.arange(CELLS.n_cells)[::-1]
     shifted = tabular.CellMap(CELLS.cells[order] + [10, 20])
@@ -196,8 +207,12 @@ def test_one_step_rule_with_the_exact_model_loops_between_two_cells():
 
     source, target = track(np.zeros(4, int)), track(current)
     rule = tabular.OneStepRule(
-        TableQ(source, cells, 0.9), IdentityMapping(),
-        lambda s, a: cells.cells[source.next_state[cells.index(s), a]].astype(float), target, cells)
+        TableQ(source, cells, 0.9),
+        IdentityMapping(),
+        lambda s, a: cells.cells[source.next_state[cells.index(s), a]].astype(float),
+        target,
+        cells,
+    )
     decision = rule.step(np.array([[1.0], [2.0]]))
     # From 1 the source goes to 2; "left" lands exactly there (1 - 1 + 2), while "right" would
     # reach the goal (1 + 1 + 2, clipped). From 2 the source goes to 3; "right" lands on 1 (2 + 1 - 2),
@@ -207,17 +222,30 @@ def test_one_step_rule_with_the_exact_model_loops_between_two_cells():
     assert decision.action.tolist() == [0, 1]
     assert target.next_state[[1, 2], decision.action].tolist() == [2, 1]
     # The replanner with the same exact model takes "right" at 1, to the goal.
-    exact = tabular.fit_tabular_apprentice(Transitions(
-        np.arange(3).repeat(2)[:, None], np.tile([0, 1], 3), target.reward[:3].ravel(),
-        target.next_state[:3].ravel()[:, None], target.absorbing[:3].ravel(), np.ones(6, bool)), cells, source)
+    exact = tabular.fit_tabular_apprentice(
+        Transitions(
+            np.arange(3).repeat(2)[:, None],
+            np.tile([0, 1], 3),
+            target.reward[:3].ravel(),
+            target.next_state[:3].ravel()[:, None],
+            target.absorbing[:3].ravel(),
+            np.ones(6, bool),
+        ),
+        cells,
+        source,
+    )
     assert tabular.replan(exact, cells, 0.9)(np.array([[1.0]])).tolist() == [1]
 
 
 def test_one_step_rule_with_the_exact_windy_model_is_trapped_from_the_start():
     # The wind of column 6 (2 up) throws every move from (0, 6) back to (0, 6): a 1-cycle.
     rule = tabular.OneStepRule(
-        TableQ(SOURCE, CELLS, GAMMA), IdentityMapping(),
-        lambda s, a: sampling.step_from("gridworld", "plain", s, a), TARGET, CELLS)
+        TableQ(SOURCE, CELLS, GAMMA),
+        IdentityMapping(),
+        lambda s, a: sampling.step_from("gridworld", "plain", s, a),
+        TARGET,
+        CELLS,
+    )
     cell, path = int(CELLS.index(np.array([gridworld.START], float))[0]), []
     for _ in range(gridworld.DEFAULT_TIME_LIMIT):
         path.append(tuple(CELLS.cells[cell]))

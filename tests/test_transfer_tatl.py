@@ -54,8 +54,15 @@ def _policy(gain, kappa, c, low=-50.0, high=50.0, adaptive_actions=None, seed=0)
     s_next = target_step(s, a, gain, kappa, c) + 1e-4 * rng.normal(size=s.shape)
     apprentice = fit_apprentice(s, a, s_next, LinearFeatures())
     return TATLPolicy(
-        OneStepLQRQ(), CHI, source_step, apprentice, SOURCE_ACTIONS, 2.0 * SOURCE_ACTIONS,
-        [low], [high], adaptive_actions=adaptive_actions,
+        OneStepLQRQ(),
+        CHI,
+        source_step,
+        apprentice,
+        SOURCE_ACTIONS,
+        2.0 * SOURCE_ACTIONS,
+        [low],
+        [high],
+        adaptive_actions=adaptive_actions,
     )
 
 
@@ -263,8 +270,10 @@ def test_tatl_tracks_the_projected_source_across_the_wrap():
         s_T = pendulum_step(s_T, policy(s_T), 12.0, 2.0, 0.3)
         x = pendulum_source_step(x, SwingQ().greedy(x))
     rollout = np.abs(policy.apprentice.difference(s_T, x)).max()
-    print(f"crossing {crosses.mean():.2f}; tracking {error:.2e}; unwrapped apprentice {plain_error:.2e}; "
-          f"40-step deviation {rollout:.2e}")
+    print(
+        f"crossing {crosses.mean():.2f}; tracking {error:.2e}; unwrapped apprentice {plain_error:.2e}; "
+        f"40-step deviation {rollout:.2e}"
+    )
     assert error < 1e-3 and plain_error > 0.1 and rollout < 1e-2
 
 
@@ -287,8 +296,9 @@ def test_discrete_tatl_uses_the_wrapped_distance():
     rng = np.random.default_rng(1)
     s = np.column_stack([rng.uniform(-np.pi, np.pi, 500), rng.uniform(-4, 4, 500)])
     a = rng.uniform(-1, 1, size=(500, 1))
-    apprentice = fit_apprentice(s, a, pendulum_step(s, a, 12.0, -1.0, 0.3), LinearFeatures(periodic=ANGLE),
-                                periodic=ANGLE)
+    apprentice = fit_apprentice(
+        s, a, pendulum_step(s, a, 12.0, -1.0, 0.3), LinearFeatures(periodic=ANGLE), periodic=ANGLE
+    )
     policy = DiscreteTATLPolicy(SwingQ(), IdentityMapping(), pendulum_source_step, apprentice, P_ACTIONS, P_ACTIONS)
     chosen = policy(states)
     s_hat = pendulum_source_step(states, SwingQ().greedy(states))

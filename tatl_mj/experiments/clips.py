@@ -42,15 +42,24 @@ def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artif
 
 
 def render_from_spec(
-    spec_path: str, *, method: str, seed: int, out: str, seconds: float = 5.0, width: int = 640,
-    height: int = 480, fps: int = 30, preset: str = "smoke", run_dir: str | None = None,
+    spec_path: str,
+    *,
+    method: str,
+    seed: int,
+    out: str,
+    seconds: float = 5.0,
+    width: int = 640,
+    height: int = 480,
+    fps: int = 30,
+    preset: str = "smoke",
+    run_dir: str | None = None,
     with_source: bool = False,
 ) -> Path:
     suffix = Path(out).suffix.lower()
     if suffix not in (".mp4", ".gif"):
         raise ValueError(f"clip path must end in .mp4 or .gif, got {out!r}")
     spec = load_spec(spec_path)
-    chosen = spec.preset(preset)
+    spec.preset(preset)  # an unknown preset fails here, naming the valid ones
     target = spec.target
     if method != RANDOM and method not in spec.methods:
         raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
@@ -66,8 +75,14 @@ def render_from_spec(
         mapping = artifacts.mapping
         source = (source_env, lambda state: mapping.chi_plus(np.asarray(state)[None])[0])
     frames = render.render_episode(
-        env, policy, seconds=seconds, width=width, height=height, fps=fps,
-        method_label=f"{method.upper()} on {target.domain}/{target.task}", source=source,
+        env,
+        policy,
+        seconds=seconds,
+        width=width,
+        height=height,
+        fps=fps,
+        method_label=f"{method.upper()} on {target.domain}/{target.task}",
+        source=source,
     )
     render.write_clip(frames, out, fps)
     return Path(out)

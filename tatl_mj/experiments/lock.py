@@ -43,8 +43,10 @@ def _describe(path: Path) -> str:
 
 def _holder_info() -> bytes:
     info = {
-        "pid": os.getpid(), "host": socket.gethostname(),
-        "since": time.strftime("%Y-%m-%d %H:%M:%S"), "command": " ".join(sys.argv) or sys.executable,
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "since": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "command": " ".join(sys.argv) or sys.executable,
     }
     return (json.dumps(info) + "\n").encode()
 
@@ -78,7 +80,9 @@ def hold(root: str | Path) -> Iterator[Path]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise LockHeld(f"{root} is in use by another run: {_describe(path)}; wait for it or use another --out") from None
+            raise LockHeld(
+                f"{root} is in use by another run: {_describe(path)}; wait for it or use another --out"
+            ) from None
         os.ftruncate(fd, 0)
         os.write(fd, _holder_info())
         try:
@@ -104,8 +108,10 @@ def _hold_by_pid(path: Path) -> Iterator[None]:  # pragma: no cover - Windows
             except (OSError, ValueError, KeyError, TypeError):
                 stale = False
             if not stale:
-                raise LockHeld(f"{path.parent} is in use by another run: {_describe(path)}; "
-                               f"wait for it, use another --out, or delete {path} if no run is alive") from None
+                raise LockHeld(
+                    f"{path.parent} is in use by another run: {_describe(path)}; "
+                    f"wait for it, use another --out, or delete {path} if no run is alive"
+                ) from None
             path.unlink(missing_ok=True)
     else:
         raise LockHeld(f"{path.parent} is in use by another run: {_describe(path)}")

@@ -55,12 +55,17 @@ class SourceArtifacts:
 
 # --- data -----------------------------------------------------------------------
 
+
 def collect(side: Side, n: int, seed: int) -> Transitions:
     """``n`` random-policy transitions of one side, as its spec's ``data`` says."""
     if side.data.sampling == "episodes":
         return sampling.collect(
-            side.domain, side.task, n, seed,
-            task_kwargs=side.task_kwargs, max_episode_steps=side.data.episode_steps,
+            side.domain,
+            side.task,
+            n,
+            seed,
+            task_kwargs=side.task_kwargs,
+            max_episode_steps=side.data.episode_steps,
         )
     rng = np.random.default_rng(seed)
     low, high = np.asarray(side.data.state_low), np.asarray(side.data.state_high)
@@ -70,8 +75,12 @@ def collect(side: Side, n: int, seed: int) -> Transitions:
     task = suite.load(side.domain, side.task, task_kwargs=side.task_kwargs).task
     absorbing = np.asarray(task.batch_absorbing(next_states), dtype=bool)
     return Transitions(
-        states=states, actions=actions, rewards=task.batch_reward(next_states),
-        next_states=next_states, absorbing=absorbing, last=np.ones(n, dtype=bool),
+        states=states,
+        actions=actions,
+        rewards=task.batch_reward(next_states),
+        next_states=next_states,
+        absorbing=absorbing,
+        last=np.ones(n, dtype=bool),
     )
 
 
@@ -93,12 +102,18 @@ def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) 
     """Per-episode returns and lengths of ``policy`` on the target task."""
     target = spec.target
     return sampling.evaluate(
-        target.domain, target.task, policy, preset.evaluation_episodes, seed,
-        task_kwargs=target.task_kwargs, max_episode_steps=preset.evaluation_steps,
+        target.domain,
+        target.task,
+        policy,
+        preset.evaluation_episodes,
+        seed,
+        task_kwargs=target.task_kwargs,
+        max_episode_steps=preset.evaluation_steps,
     )
 
 
 # --- phases I and II ----------------------------------------------------------
+
 
 def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int]:
     learner = spec.source_learning
@@ -110,7 +125,8 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     n_actions = source.n_actions
     data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.name, "source-data"))
     regressor = fqi.make_regressor(
-        {**learner.regressor_spec(), "seed": derive_seed(seed, spec.name, "source-fqi")}, data.state_dim,
+        {**learner.regressor_spec(), "seed": derive_seed(seed, spec.name, "source-fqi")},
+        data.state_dim,
     )
     q = fqi.fitted_q_iteration(data, n_actions, regressor, learner.gamma, learner.iterations)
     return q, len(data)
@@ -125,13 +141,17 @@ def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
     """The source's samples for a learned map: random-policy episodes unless the spec asks for its box."""
     side = spec.source
     if spec.mapping.source_data == "episodes":
-        side = dataclasses.replace(side, data=dataclasses.replace(side.data, sampling="episodes", state_low=(),
-                                                                   state_high=()))
+        side = dataclasses.replace(
+            side, data=dataclasses.replace(side.data, sampling="episodes", state_low=(), state_high=())
+        )
     return collect(side, n, derive_seed(seed, spec.name, "alignment-source"))
 
 
 def _learn_mapping(
-    spec: ExperimentSpec, preset: Preset, seed: int, target_stream: Transitions,
+    spec: ExperimentSpec,
+    preset: Preset,
+    seed: int,
+    target_stream: Transitions,
 ) -> tuple[Any, dict | None, int, int]:
     """Phase II: the mapping (in each task's mapping coordinates), its record, and the
     source and target samples it used (the target's are the stream's head, reused later)."""
@@ -154,13 +174,22 @@ def _learn_mapping(
             {k: tuple(v) if isinstance(v, list) else v for k, v in spec.mapping.transition.items()}
         )
         mapping, record = coordinates.align_in_coordinates(
-            source, target, source_coords, target_coords, describe(spec.source).n_actions,
-            describe(spec.target).n_actions, settings=settings, rng=rng,
+            source,
+            target,
+            source_coords,
+            target_coords,
+            describe(spec.source).n_actions,
+            describe(spec.target).n_actions,
+            settings=settings,
+            rng=rng,
         )
         return mapping, record, len(source), len(target)
     inner = alignment.align_manifolds(
-        source_coords.to_mapping(source.states), target_coords.to_mapping(target.states),
-        n_neighbors=spec.mapping.n_neighbors, mu=spec.mapping.mu, rng=rng,
+        source_coords.to_mapping(source.states),
+        target_coords.to_mapping(target.states),
+        n_neighbors=spec.mapping.n_neighbors,
+        mu=spec.mapping.mu,
+        rng=rng,
     )
     return coordinates.InCoordinates(inner, source_coords, target_coords), None, len(source), len(target)
 
@@ -182,18 +211,28 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    returns, _ = evaluate(spec, preset, random_policy(spec.target, derive_seed(seed, "random-policy")),
-                          derive_seed(seed, spec.name, "evaluation"))
+    returns, _ = evaluate(
+        spec,
+        preset,
+        random_policy(spec.target, derive_seed(seed, "random-policy")),
+        derive_seed(seed, spec.name, "evaluation"),
+    )
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
-        source_q=source_q, mapping=mapping, target_stream=target_stream,
-        random_return=float(np.mean(returns)), mapping_target_samples=n_map_target,
-        mapping_source_samples=n_map_source, source_samples=source_samples, timings=timings,
+        source_q=source_q,
+        mapping=mapping,
+        target_stream=target_stream,
+        random_return=float(np.mean(returns)),
+        mapping_target_samples=n_map_target,
+        mapping_source_samples=n_map_source,
+        source_samples=source_samples,
+        timings=timings,
         mapping_record=mapping_record,
     )
 
 
 # --- phase III ----------------------------------------------------------------
+
 
 def _source_step(source: Side, description: TaskDescription, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Algorithm 1's query of the source simulator, from states it can be put in.
@@ -215,16 +254,20 @@ def _target_step(target: Side, description: TaskDescription, states: np.ndarray,
     values = np.asarray(values, dtype=np.float64).reshape(len(states), -1)
     if description.discrete:
         gaps = np.linalg.norm(values[:, None, :] - description.action_values[None], axis=2)
-        return sampling.step_from(target.domain, target.task, states, np.argmin(gaps, axis=1),
-                                  task_kwargs=target.task_kwargs)
+        return sampling.step_from(
+            target.domain, target.task, states, np.argmin(gaps, axis=1), task_kwargs=target.task_kwargs
+        )
     return sampling.step_values_from(target.domain, target.task, states, values, task_kwargs=target.task_kwargs)
 
 
 def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -> Transitions:
     """n target transitions of ``policy`` from the target's own (random) starts, seeded per seed."""
     target = spec.target
-    env = suite.load(target.domain, target.task,
-                     task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.name, "policy-data")})
+    env = suite.load(
+        target.domain,
+        target.task,
+        task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.name, "policy-data")},
+    )
     description = describe(target)
     actions = np.arange(description.n_actions) if description.discrete else suite.action_set(target.domain)
     index_policy = policy if description.discrete else _as_indices(policy, description.action_values)
@@ -233,9 +276,11 @@ def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -
 
 def _as_indices(policy: Callable, action_values: np.ndarray) -> Callable:
     """A policy over action values as one over the nearest discrete action's index."""
+
     def indices(states: np.ndarray) -> np.ndarray:
         values = np.asarray(policy(states), dtype=np.float64).reshape(len(states), -1)
         return np.argmin(np.linalg.norm(values[:, None] - action_values[None], axis=2), axis=1)
+
     return indices
 
 
@@ -275,7 +320,10 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
 
 
 def transfer_problem(
-    spec: ExperimentSpec, preset: Preset, artifacts: SourceArtifacts, seed: int,
+    spec: ExperimentSpec,
+    preset: Preset,
+    artifacts: SourceArtifacts,
+    seed: int,
 ) -> "method.TransferProblem":
     """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its evaluation hooks."""
     source, target = describe(spec.source), describe(spec.target)
@@ -299,7 +347,12 @@ def transfer_problem(
 
 
 def learned_policy(
-    spec: ExperimentSpec, preset: Preset, seed: int, transfer: Any, artifacts: SourceArtifacts, budget: int,
+    spec: ExperimentSpec,
+    preset: Preset,
+    seed: int,
+    transfer: Any,
+    artifacts: SourceArtifacts,
+    budget: int,
     problem: "method.TransferProblem | None" = None,
 ) -> Callable:
     """What ``transfer`` learns from the first ``budget`` target samples of this seed.
@@ -312,7 +365,11 @@ def learned_policy(
 
 
 def run_method(
-    spec: ExperimentSpec, preset: Preset, seed: int, method_name: str, artifacts: SourceArtifacts,
+    spec: ExperimentSpec,
+    preset: Preset,
+    seed: int,
+    method_name: str,
+    artifacts: SourceArtifacts,
     transfer: Any = None,
 ) -> dict:
     """One method's learning curve for one seed: return against target samples used.
@@ -338,18 +395,20 @@ def run_method(
         learn_s = time.perf_counter() - start
         start = time.perf_counter()
         returns, lengths = evaluate(spec, preset, policy, eval_seed)
-        curve.append({
-            "samples": int(budget),
-            # Algorithm 2 may stop before the budget; the curve still counts the budget.
-            "samples_used": int(getattr(policy, "samples_used", None) or budget) if uses_samples else 0,
-            "mean_return": float(np.mean(returns)),
-            "returns": [float(r) for r in returns],
-            "mean_steps": float(np.mean(lengths)),
-            "learn_s": learn_s,
-            # e.g. Algorithm 2's stopping rule not met within the budget
-            "warnings": sorted({str(w.message) for w in caught}),
-            "evaluate_s": time.perf_counter() - start,
-        })
+        curve.append(
+            {
+                "samples": int(budget),
+                # Algorithm 2 may stop before the budget; the curve still counts the budget.
+                "samples_used": int(getattr(policy, "samples_used", None) or budget) if uses_samples else 0,
+                "mean_return": float(np.mean(returns)),
+                "returns": [float(r) for r in returns],
+                "mean_steps": float(np.mean(lengths)),
+                "learn_s": learn_s,
+                # e.g. Algorithm 2's stopping rule not met within the budget
+                "warnings": sorted({str(w.message) for w in caught}),
+                "evaluate_s": time.perf_counter() - start,
+            }
+        )
     final_used = getattr(policy, "samples_used", None)
     return {
         "experiment": spec.name,

@@ -35,10 +35,9 @@ COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
 LABELS = {"ta-tl": "TA-TL", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
 # Colours for other methods, picked by a hash of the name (stable across runs);
 # none is close to the fixed ones or to the grey/black reference lines.
-PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173",
-           "#e7ba52", "#008080")
+PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173", "#e7ba52", "#008080")
 REFERENCE_METHOD = "ta-tl"  # the table's "vs" column divides by this method's median
-CLIP_SCALES = 6.0           # values beyond this many robust spreads from the bulk are clipped
+CLIP_SCALES = 6.0  # values beyond this many robust spreads from the bulk are clipped
 
 
 def method_label(method: str) -> str:
@@ -98,6 +97,7 @@ def spaced_ticks(values: Sequence[float], min_gap: float) -> list[float]:
 
 
 # --- Table ------------------------------------------------------------------------
+
 
 def seed_note(comparison: Comparison) -> str:
     """A sentence saying which seeds are compared and which are left out (empty if none)."""
@@ -176,23 +176,31 @@ def table(summary: dict) -> str:
             lines.append(f"| {method_label(r.method)} | {final} | {samples} | {ratio} |")
         threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
         mapping = sorted(set(exp.get("mapping_target_samples", [])))
-        lines += ["", f"Random policy: {comparison.random_return:.4g}; threshold: {threshold}; target "
-                  f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
-                  f"{mapping}.", ""]
+        lines += [
+            "",
+            f"Random policy: {comparison.random_return:.4g}; threshold: {threshold}; target "
+            f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
+            f"{mapping}.",
+            "",
+        ]
     return "\n".join(lines)
 
 
 def _no_threshold_sentence(comparison: Comparison) -> str:
     best = method_label(comparison.best_method) if comparison.best_method else "none"
-    return (f"**No meaningful threshold: no method's mean final return beats the random policy's "
-            f"({comparison.random_return:.4g}), so the threshold would lie at or below it. Judged on final "
-            f"returns: best {best}.**")
+    return (
+        f"**No meaningful threshold: no method's mean final return beats the random policy's "
+        f"({comparison.random_return:.4g}), so the threshold would lie at or below it. Judged on final "
+        f"returns: best {best}.**"
+    )
 
 
 # --- Figures ----------------------------------------------------------------------
 
-def axis_limits(values: Sequence[float], keep: Sequence[float] = (),
-                scales: float = CLIP_SCALES) -> tuple[float, float]:
+
+def axis_limits(
+    values: Sequence[float], keep: Sequence[float] = (), scales: float = CLIP_SCALES
+) -> tuple[float, float]:
     """y-limits holding the bulk of ``values`` and every one of ``keep`` (reference lines).
 
     A value more than ``scales`` robust spreads (1.4826 x median absolute
@@ -221,10 +229,28 @@ def _mark_clipped(ax: Any, x: np.ndarray, y: np.ndarray, limits: tuple[float, fl
     """Triangles on the axis edge for values beyond it; returns how many."""
     low, high = limits
     below, above = y < low, y > high
-    ax.scatter(x[below], np.full(below.sum(), low), marker="v", s=28, color=color, edgecolor="black",
-               linewidth=0.5, zorder=5, clip_on=False)
-    ax.scatter(x[above], np.full(above.sum(), high), marker="^", s=28, color=color, edgecolor="black",
-               linewidth=0.5, zorder=5, clip_on=False)
+    ax.scatter(
+        x[below],
+        np.full(below.sum(), low),
+        marker="v",
+        s=28,
+        color=color,
+        edgecolor="black",
+        linewidth=0.5,
+        zorder=5,
+        clip_on=False,
+    )
+    ax.scatter(
+        x[above],
+        np.full(above.sum(), high),
+        marker="^",
+        s=28,
+        color=color,
+        edgecolor="black",
+        linewidth=0.5,
+        zorder=5,
+        clip_on=False,
+    )
     return int(below.sum() + above.sum())
 
 
@@ -249,10 +275,13 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     for r in results:
         data = experiment["methods"][r.method]
         rows = [data["seeds"].index(s) for s in r.seeds]
-        curves[r.method] = (np.asarray(data["curve"]["samples"], dtype=np.float64),
-                            np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows])
-    references = [v for v in (comparison.random_return, comparison.threshold if comparison.meaningful else None)
-                  if v is not None]
+        curves[r.method] = (
+            np.asarray(data["curve"]["samples"], dtype=np.float64),
+            np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows],
+        )
+    references = [
+        v for v in (comparison.random_return, comparison.threshold if comparison.meaningful else None) if v is not None
+    ]
     limits = axis_limits([v for _, y in curves.values() for v in y.ravel()], references)
     clipped = 0
     clipped_values: list[float] = []
@@ -266,20 +295,36 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
         median = np.median(returns, axis=0)
         ax_curve.plot(samples, median, color=color, lw=2.2, marker="o", ms=3.5)
         seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
-        handles.append(Line2D([], [], color=color, lw=2.2, marker="o", ms=3.5,
-                              label=f"{method_label(r.method)}: median of {seeds}"))
+        handles.append(
+            Line2D(
+                [], [], color=color, lw=2.2, marker="o", ms=3.5, label=f"{method_label(r.method)}: median of {seeds}"
+            )
+        )
     handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.8, label="thin lines: one seed each"))
     if comparison.random_return is not None:
         ax_curve.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
-        handles.append(Line2D([], [], color="0.45", ls=":", lw=1.2,
-                              label=f"reference: random policy ({comparison.random_return:.4g})"))
+        handles.append(
+            Line2D(
+                [], [], color="0.45", ls=":", lw=1.2, label=f"reference: random policy ({comparison.random_return:.4g})"
+            )
+        )
     if comparison.meaningful:
         ax_curve.axhline(comparison.threshold, color="black", ls="--", lw=0.9)
-        handles.append(Line2D([], [], color="black", ls="--", lw=0.9,
-                              label=f"threshold ({comparison.threshold:.4g})"))
+        handles.append(Line2D([], [], color="black", ls="--", lw=0.9, label=f"threshold ({comparison.threshold:.4g})"))
     if clipped:
-        handles.append(Line2D([], [], color="white", marker="v", markeredgecolor="black", markerfacecolor="0.6",
-                              ms=6, lw=0, label=f"beyond the axis, clipped ({clipped} point{'s' * (clipped > 1)})"))
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color="white",
+                marker="v",
+                markeredgecolor="black",
+                markerfacecolor="0.6",
+                ms=6,
+                lw=0,
+                label=f"beyond the axis, clipped ({clipped} point{'s' * (clipped > 1)})",
+            )
+        )
     ax_curve.set_ylim(*limits)
     ax_curve.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
     ax_curve.set_xscale("log")
@@ -317,16 +362,17 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
         ticks = [f"{_wrap(method_label(r.method))}\n{r.reached}/{len(r.seeds)} reached" for r in results]
         if len(results) > 5:  # slanted below: one line each
             ticks = [f"{method_label(r.method)} ({r.reached}/{len(r.seeds)})" for r in results]
-        handles += [Line2D([], [], color="black", marker="o", ms=3.5, lw=0, label="(b) one seed"),
-                    Line2D([], [], color="0.3", lw=3, label="(b) median, 'never' counted as infinite")]
+        handles += [
+            Line2D([], [], color="black", marker="o", ms=3.5, lw=0, label="(b) one seed"),
+            Line2D([], [], color="0.3", lw=3, label="(b) median, 'never' counted as infinite"),
+        ]
     else:
         finals = [v for r in results for v in r.final_returns]
         final_limits = axis_limits(finals, references)
         for i, r in enumerate(results):
             values = np.asarray(r.final_returns)
             ax_len.hlines(np.median(values), i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
-            ax_len.scatter(i + np.asarray(spread), np.clip(values, *final_limits), color="black", s=12,
-                           zorder=3)
+            ax_len.scatter(i + np.asarray(spread), np.clip(values, *final_limits), color="black", s=12, zorder=3)
             _mark_clipped(ax_len, i + np.asarray(spread), values, final_limits, colors[r.method])
         if comparison.random_return is not None:
             ax_len.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
@@ -337,8 +383,14 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
         ticks = [_wrap(method_label(r.method)) if len(results) <= 5 else method_label(r.method) for r in results]
     # Up to five methods fit side by side (labels wrapped); more are slanted.
     many = len(results) > 5
-    ax_len.set_xticks(positions, ticks, fontsize=8, rotation=30 if many else 0, ha="right" if many else "center",
-                      rotation_mode="anchor" if many else "default")
+    ax_len.set_xticks(
+        positions,
+        ticks,
+        fontsize=8,
+        rotation=30 if many else 0,
+        ha="right" if many else "center",
+        rotation_mode="anchor" if many else "default",
+    )
     ax_len.set_xlim(-0.6, len(results) - 0.4)
     ax_len.grid(axis="y", alpha=0.25)
 
@@ -377,11 +429,13 @@ def _caption(comparison: Comparison, clipped_values: list[float]) -> str:
             f"Threshold (dashed) = random-policy return + {THRESHOLD_FRACTION:.0%} x (best method's mean final "
             f"return - random-policy return) = {comparison.threshold:.4g}. (b) A seed's samples to threshold: "
             "the smallest budget from which its return stays at or above the threshold for every larger "
-            "budget; seeds that never stay there are on the 'never' row.")
+            "budget; seeds that never stay there are on the 'never' row."
+        )
     else:
         parts.append(
             "No meaningful threshold: no method's mean final return beats the random policy, so the "
-            "experiment is judged on final returns; (b) shows each seed's final return.")
+            "experiment is judged on final returns; (b) shows each seed's final return."
+        )
     if clipped_values:
         parts.append(f"Triangles: values beyond the axis (most extreme {max(clipped_values, key=abs):.3g}).")
     note = seed_note(comparison)

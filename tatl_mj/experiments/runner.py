@@ -25,7 +25,9 @@ from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
-from tatl_mj.experiments import lock, pipeline, summary as summary_mod, workers as workers_mod
+from tatl_mj.experiments import lock, pipeline
+from tatl_mj.experiments import summary as summary_mod
+from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, spec_to_dict
 from tatl_mj.transfer import registry
@@ -46,7 +48,11 @@ class Unit:
 
 
 def work(
-    spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes | None, transfer: Any = None,
+    spec: ExperimentSpec,
+    preset_name: str,
+    unit: Unit,
+    source_blob: bytes | None,
+    transfer: Any = None,
 ) -> dict:
     """Runs one unit in a worker; never raises (a failure is returned as data).
 
@@ -60,7 +66,9 @@ def work(
             artifacts = pipeline.learn_source(spec, preset, unit.seed)
             blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
             record = {
-                "experiment": spec.name, "seed": unit.seed, "random_return": artifacts.random_return,
+                "experiment": spec.name,
+                "seed": unit.seed,
+                "random_return": artifacts.random_return,
                 "source_samples": artifacts.source_samples,
                 "mapping_source_samples": artifacts.mapping_source_samples,
                 "mapping_target_samples": artifacts.mapping_target_samples,
@@ -92,8 +100,10 @@ def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
     # spawn: MuJoCo/GL state must not be forked into workers.
     # [robustness] workers die with this process, however it dies.
     with ProcessPoolExecutor(
-        max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-        initializer=workers_mod.die_with_parent, initargs=(os.getpid(),),
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=workers_mod.die_with_parent,
+        initargs=(os.getpid(),),
     ) as pool:
         futures = {pool.submit(work, *args): unit for unit, args in jobs}
         pending = set(futures)
@@ -141,6 +151,7 @@ def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[U
 
 # --- the run ----------------------------------------------------------------------
 
+
 def _versions() -> dict:
     names = ("tatl-mj", "mujoco", "dm-control", "numpy", "scipy", "scikit-learn")
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
@@ -159,8 +170,7 @@ def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSp
         old = read_json(run_dir.manifest)
         if old.get("preset") != preset:
             raise SystemExit(
-                f"{run_dir.root} holds a run with preset {old.get('preset')!r}; "
-                f"use another --out for preset {preset!r}"
+                f"{run_dir.root} holds a run with preset {old.get('preset')!r}; use another --out for preset {preset!r}"
             )
         experiments = sorted(set(old.get("experiments", [])) | {s.name for s in specs})
     else:
@@ -169,7 +179,10 @@ def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSp
 
 
 def _plan(
-    specs: list[ExperimentSpec], preset: str, seeds: list[int], methods: Iterable[str] | dict[str, Any] | None,
+    specs: list[ExperimentSpec],
+    preset: str,
+    seeds: list[int],
+    methods: Iterable[str] | dict[str, Any] | None,
 ) -> tuple[list[Unit], dict[str, Any]]:
     """Every unit of the run, sources first, and the user's method objects by name.
 
@@ -255,8 +268,15 @@ def run(
 
 
 def _run_locked(
-    specs: list[ExperimentSpec], preset: str, seeds: list[int], run_dir: RunDirectory, workers: int,
-    executor: str, all_units: list[Unit], custom: dict[str, Any], progress: bool,
+    specs: list[ExperimentSpec],
+    preset: str,
+    seeds: list[int],
+    run_dir: RunDirectory,
+    workers: int,
+    executor: str,
+    all_units: list[Unit],
+    custom: dict[str, Any],
+    progress: bool,
     dispatch: Callable[[list[Job]], Iterator[tuple[Unit, dict]]],
 ) -> dict:
     _check_manifest(run_dir, preset, specs)
@@ -285,9 +305,51 @@ def _run_locked(
 
     method_names = list(dict.fromkeys(u.name for u in all_units if u.name != SOURCE_UNIT))
     summary = summary_mod.build(
-        run_dir, specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=method_names,
-        versions=_versions(), wall_s=time.perf_counter() - start, workers=workers, executor=executor,
+        run_dir,
+        specs=[spec_to_dict(s) for s in specs],
+        preset=preset,
+        seeds=seeds,
+        methods=method_names,
+        versions=_versions(),
+        wall_s=time.perf_counter() - start,
+        workers=workers,
+        executor=executor,
         failures=record.failures,
     )
     write_json(run_dir.summary, summary)
     return summary
+
+
+def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
+    """Summed seconds per experiment and phase from a run's records (all seeds): source
+    learning, target sampling, mapping, the random reference, and each method's learning
+    and evaluation. What ``tatl run`` prints at its end."""
+    out: dict[str, dict[str, float]] = {}
+    root = RunDirectory(run_dir).root / "records"
+    for path in sorted(root.glob("*/seed*/*.json")):
+        experiment, unit = path.parent.parent.name, path.stem
+        try:
+            record = read_json(path)
+        except ValueError:
+            continue  # a corrupt record is named and recomputed by the next run
+        phases = out.setdefault(experiment, {})
+        if unit == SOURCE_UNIT:
+            for key, value in record.get("timings", {}).items():
+                phases[key.removesuffix("_s")] = phases.get(key.removesuffix("_s"), 0.0) + float(value)
+            continue
+        for part in ("learn", "evaluate"):
+            key = f"{unit} {part}"
+            phases[key] = phases.get(key, 0.0) + sum(float(p.get(f"{part}_s", 0.0)) for p in record.get("curve", []))
+    return out
+
+
+def format_timings(table: dict[str, dict[str, float]]) -> str:
+    """The breakdown as text: per experiment, its phases from the slowest, with their share."""
+    lines = []
+    for experiment, phases in table.items():
+        total = sum(phases.values()) or 1.0
+        lines.append(f"{experiment}: {total:.1f} s of work")
+        for phase, seconds in sorted(phases.items(), key=lambda kv: -kv[1]):
+            if seconds >= 0.05 * total:
+                lines.append(f"  {phase:<32} {seconds:8.1f} s  {100 * seconds / total:4.0f}%")
+    return "\n".join(lines)

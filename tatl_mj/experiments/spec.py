@@ -222,8 +222,10 @@ def _check_side(spec: ExperimentSpec, side_name: str, description: Any) -> None:
     _choice(p, f"{side_name}.data.sampling", side.data.sampling, SAMPLING_KINDS)
     low, high = side.data.state_low, side.data.state_high
     if side.data.sampling == "uniform":
-        if len(low) != description.state_dim or len(high) != description.state_dim or any(
-            lo >= hi for lo, hi in zip(low, high)
+        if (
+            len(low) != description.state_dim
+            or len(high) != description.state_dim
+            or any(lo >= hi for lo, hi in zip(low, high))
         ):
             raise SpecError(
                 f"{p}: keys '{side_name}.data.state_low/state_high' must be arrays of {description.state_dim} "
@@ -272,8 +274,13 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
     if mapping.kind == "affine":
         rows = mapping.matrix
         if len(rows) != target.state_dim or any(len(r) != source.state_dim for r in rows):
-            _fail(p, "mapping.matrix", f"{target.state_dim} rows (target: {', '.join(target.state_names)}) of "
-                  f"{source.state_dim} numbers (source: {', '.join(source.state_names)})", rows)
+            _fail(
+                p,
+                "mapping.matrix",
+                f"{target.state_dim} rows (target: {', '.join(target.state_names)}) of "
+                f"{source.state_dim} numbers (source: {', '.join(source.state_names)})",
+                rows,
+            )
         if mapping.offset and len(mapping.offset) != len(rows):
             _fail(p, "mapping.offset", f"an array of {len(rows)} numbers (one per matrix row)", mapping.offset)
     elif mapping.matrix or mapping.offset:
@@ -287,8 +294,9 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
         from tatl_mj.transfer.alignment import TransitionAlignment
 
         try:
-            TransitionAlignment.from_dict({k: tuple(v) if isinstance(v, list) else v
-                                           for k, v in mapping.transition.items()})
+            TransitionAlignment.from_dict(
+                {k: tuple(v) if isinstance(v, list) else v for k, v in mapping.transition.items()}
+            )
         except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'mapping.transition': {error}") from None
     _choice(p, "mapping.source_data", mapping.source_data, ALIGNMENT_DATA)
@@ -393,4 +401,3 @@ def load_spec(path: str | Path) -> ExperimentSpec:
 def spec_to_dict(spec: ExperimentSpec) -> dict:
     """A JSON-able copy of the spec (for summary.json)."""
     return dataclasses.asdict(spec)
-

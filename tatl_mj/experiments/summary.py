@@ -53,8 +53,9 @@ def samples_to_threshold(samples: Sequence[float], returns: Sequence[float], thr
     return reached
 
 
-def threshold_for(final_means: dict[str, float], random_return: float,
-                  fraction: float = THRESHOLD_FRACTION) -> tuple[float, str, bool]:
+def threshold_for(
+    final_means: dict[str, float], random_return: float, fraction: float = THRESHOLD_FRACTION
+) -> tuple[float, str, bool]:
     """``(threshold, best_method, meaningful)`` from each method's mean final return.
 
     ``meaningful`` is False when the threshold is at or below ``random_return``.
@@ -74,7 +75,7 @@ class MethodResult:
     seeds: tuple[int, ...]
     final_returns: tuple[float, ...]
     samples_to_threshold: tuple[float, ...]  # math.inf: never; empty when no meaningful threshold
-    extra_seeds: tuple[int, ...]             # finished but not shared by every method: not compared
+    extra_seeds: tuple[int, ...]  # finished but not shared by every method: not compared
     largest_budget: int
 
     @property
@@ -97,7 +98,7 @@ class Comparison:
 
     seeds: tuple[int, ...]
     methods: tuple[MethodResult, ...]
-    missing: tuple[str, ...]                 # methods asked for with no finished seed
+    missing: tuple[str, ...]  # methods asked for with no finished seed
     random_return: float | None
     threshold: float | None
     best_method: str | None
@@ -111,8 +112,7 @@ class Comparison:
         return next((r for r in self.methods if r.method == method), None)
 
 
-def compare(experiment: dict, methods: Sequence[str] | None = None,
-            fraction: float = THRESHOLD_FRACTION) -> Comparison:
+def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: float = THRESHOLD_FRACTION) -> Comparison:
     """Compares the methods of one summary experiment over their shared seeds.
 
     ``experiment`` is ``summary["experiments"][name]``: it needs ``methods``
@@ -146,21 +146,31 @@ def compare(experiment: dict, methods: Sequence[str] | None = None,
         threshold, best, meaningful = threshold_for(finals, random_return, fraction)
 
     out = []
-    for m, rows, index in results:
+    for m, rows, _ in results:
         curve = data[m]["curve"]
         budgets = list(curve["samples"])
         reached: tuple[float, ...] = ()
         if meaningful:
             reached = tuple(samples_to_threshold(budgets, curve["mean_return"][i], threshold) for i in rows)
-        out.append(MethodResult(
-            method=m, seeds=tuple(shared),
-            final_returns=tuple(float(data[m]["final_return"][i]) for i in rows),
-            samples_to_threshold=reached,
-            extra_seeds=tuple(s for s in data[m]["seeds"] if s not in shared),
-            largest_budget=int(max(budgets)),
-        ))
-    return Comparison(seeds=tuple(shared), methods=tuple(out), missing=missing, random_return=random_return,
-                      threshold=threshold, best_method=best, meaningful=meaningful)
+        out.append(
+            MethodResult(
+                method=m,
+                seeds=tuple(shared),
+                final_returns=tuple(float(data[m]["final_return"][i]) for i in rows),
+                samples_to_threshold=reached,
+                extra_seeds=tuple(s for s in data[m]["seeds"] if s not in shared),
+                largest_budget=int(max(budgets)),
+            )
+        )
+    return Comparison(
+        seeds=tuple(shared),
+        methods=tuple(out),
+        missing=missing,
+        random_return=random_return,
+        threshold=threshold,
+        best_method=best,
+        meaningful=meaningful,
+    )
 
 
 def _random_by_seed(experiment: dict) -> dict[int, float] | None:
@@ -199,8 +209,11 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
                 "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
                 "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
             },
-            "extra": {k: [recs[s].get(k) for s in seeds_done] for k in ("algorithm2_samples",) if any(
-                k in recs[s] for s in seeds_done)},
+            "extra": {
+                k: [recs[s].get(k) for s in seeds_done]
+                for k in ("algorithm2_samples",)
+                if any(k in recs[s] for s in seeds_done)
+            },
             "wall_s": [recs[s].get("wall_s") for s in seeds_done],
         }
     source_seeds = sorted(sources)
@@ -219,17 +232,20 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
         curve = out_methods[result.method]["curve"]
         out_methods[result.method]["samples_to_threshold"] = [
             _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold))
-            if comparison.meaningful else None
+            if comparison.meaningful
+            else None
             for returns in curve["mean_return"]
         ]
-    experiment.update({
-        "compared_seeds": list(comparison.seeds),
-        "seed_sets_differ": comparison.seed_sets_differ,
-        "random_return": comparison.random_return,
-        "best_method": comparison.best_method,
-        "threshold": comparison.threshold,
-        "threshold_meaningful": comparison.meaningful,
-    })
+    experiment.update(
+        {
+            "compared_seeds": list(comparison.seeds),
+            "seed_sets_differ": comparison.seed_sets_differ,
+            "random_return": comparison.random_return,
+            "best_method": comparison.best_method,
+            "threshold": comparison.threshold,
+            "threshold_meaningful": comparison.meaningful,
+        }
+    )
     return experiment
 
 
@@ -237,11 +253,18 @@ def _json_samples(value: float) -> int | None:
     return None if math.isinf(value) else int(value)
 
 
-def build(run_dir: RunDirectory, *, specs: list[dict], preset: str, seeds: list[int], methods: list[str],
-          **extra: Any) -> dict:
+def build(
+    run_dir: RunDirectory, *, specs: list[dict], preset: str, seeds: list[int], methods: list[str], **extra: Any
+) -> dict:
     """The summary of a run folder: one entry per spec (see :func:`compare` for the fields used)."""
     experiments = {}
     for spec in specs:
         experiments[spec["name"]] = {**_experiment(run_dir, spec["name"], seeds, methods), "spec": spec}
-    return {"experiments": experiments, "preset": preset, "seeds": seeds, "methods": methods,
-            "threshold_fraction": THRESHOLD_FRACTION, **extra}
+    return {
+        "experiments": experiments,
+        "preset": preset,
+        "seeds": seeds,
+        "methods": methods,
+        "threshold_fraction": THRESHOLD_FRACTION,
+        **extra,
+    }

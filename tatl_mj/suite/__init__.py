@@ -42,22 +42,19 @@ def _domain(name: str) -> ModuleType:
 def _factory(domain: str, task: str) -> Any:
     module = _domain(domain)
     if task not in module.TASKS:
-        raise ValueError(
-            f"unknown task {task!r} for domain {domain!r}; valid tasks: {sorted(module.TASKS)}"
-        )
+        raise ValueError(f"unknown task {task!r} for domain {domain!r}; valid tasks: {sorted(module.TASKS)}")
     return module.TASKS[task]
 
 
 def _check_task_kwargs(domain: str, task: str, kwargs: dict[str, Any]) -> None:
     accepted = [
-        name for name, p in inspect.signature(_factory(domain, task)).parameters.items()
+        name
+        for name, p in inspect.signature(_factory(domain, task)).parameters.items()
         if name != "environment_kwargs" and p.kind is not p.VAR_KEYWORD
     ]
     unknown = sorted(set(kwargs) - set(accepted))
     if unknown:
-        raise ValueError(
-            f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}"
-        )
+        raise ValueError(f"unknown task_kwargs {unknown} for {domain}/{task}; valid: {sorted(accepted)}")
 
 
 def describe(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> TaskDescription:

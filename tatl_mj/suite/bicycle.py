@@ -96,9 +96,7 @@ ACTIONS = np.array([[-TORQUE_LIMIT], [0.0], [TORQUE_LIMIT]])
 # Points of the front assembly in the rear frame's body coordinates (origin at the
 # rear wheel centre, axes of the upright bicycle): steer-axis point level with the
 # front wheel centre, the axis direction (pointing down), the front wheel centre.
-_STEER_POINT = np.array(
-    [WHEELBASE + TRAIL - FRONT_RADIUS * math.tan(STEER_TILT), 0.0, FRONT_RADIUS - REAR_RADIUS]
-)
+_STEER_POINT = np.array([WHEELBASE + TRAIL - FRONT_RADIUS * math.tan(STEER_TILT), 0.0, FRONT_RADIUS - REAR_RADIUS])
 _STEER_AXIS = np.array([math.sin(STEER_TILT), 0.0, -math.cos(STEER_TILT)])
 _FRONT_CENTRE = np.array([WHEELBASE, 0.0, FRONT_RADIUS - REAR_RADIUS])
 _Y = np.array([0.0, 1.0, 0.0])
@@ -122,8 +120,7 @@ class BicycleParams:
         common.check_params(self)
         if self.rider_mass >= REAR_BODY_MASS:
             raise ValueError(
-                f"BicycleParams.rider_mass must be < {REAR_BODY_MASS} kg (the rear body), "
-                f"got {self.rider_mass!r}"
+                f"BicycleParams.rider_mass must be < {REAR_BODY_MASS} kg (the rear body), got {self.rider_mass!r}"
             )
 
 
@@ -143,9 +140,7 @@ def model_xml(params: BicycleParams | None = None) -> tuple[str, dict[str, bytes
     for name, sign in (("cg_left", -1.0), ("cg_right", 1.0)):
         root.find(f".//motor[@name='{name}']").set("gear", f"0 0 {sign * weight!r} 0 0 0")
     for name, radius in (("rear_tyre", REAR_RADIUS), ("front_tyre", FRONT_RADIUS)):
-        root.find(f".//geom[@name='{name}']").set(
-            "size", f"{radius!r} {params.tyre_half_width!r} {radius!r}"
-        )
+        root.find(f".//geom[@name='{name}']").set("size", f"{radius!r} {params.tyre_half_width!r} {radius!r}")
     tyre = root.find(".//default[@class='tyre']/geom")
     tyre.set("friction", f"{params.tyre_friction!r} 0 0")
     root.find(".//geom[@name='floor']").set("friction", f"{params.tyre_friction!r} 0 0")
@@ -164,6 +159,7 @@ def cg_force_per_metre(params: BicycleParams | None = None) -> float:
 
 
 # --- Geometry of the upright-ish bicycle (vectorised) -------------------------
+
 
 def _rotate_axis(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rotates the fixed vector ``v`` about unit ``axis`` by each ``angle`` (Rodrigues)."""
@@ -184,9 +180,7 @@ def _front_points(roll: np.ndarray, pitch: np.ndarray, steer: np.ndarray) -> dic
     """World points and axes of the bicycle with its rear contact at the origin."""
     centre = _STEER_POINT + _rotate_axis(_FRONT_CENTRE - _STEER_POINT, _STEER_AXIS, steer)
     axle = _rotate_axis(_Y, _STEER_AXIS, steer)
-    rear_centre = np.stack(
-        [np.zeros_like(roll), -REAR_RADIUS * np.sin(roll), REAR_RADIUS * np.cos(roll)], axis=1
-    )
+    rear_centre = np.stack([np.zeros_like(roll), -REAR_RADIUS * np.sin(roll), REAR_RADIUS * np.cos(roll)], axis=1)
     front_centre = rear_centre + _frame_to_world(centre, roll, pitch)
     front_axle = _frame_to_world(axle, roll, pitch)
     shape = centre.shape
@@ -301,13 +295,15 @@ class Physics(common.StatePhysics):
 
         half_r, half_p = roll / 2.0, pitch / 2.0
         quat = np.stack(
-            [np.cos(half_r) * np.cos(half_p), np.sin(half_r) * np.cos(half_p),
-             np.cos(half_r) * np.sin(half_p), np.sin(half_r) * np.sin(half_p)],
+            [
+                np.cos(half_r) * np.cos(half_p),
+                np.sin(half_r) * np.cos(half_p),
+                np.cos(half_r) * np.sin(half_p),
+                np.sin(half_r) * np.sin(half_p),
+            ],
             axis=1,
         )
-        omega_world = (
-            yaw_rate[:, None] * _Z + roll_rate[:, None] * x_axis + pitch_rate[:, None] * rear_axle
-        )
+        omega_world = yaw_rate[:, None] * _Z + roll_rate[:, None] * x_axis + pitch_rate[:, None] * rear_axle
         # Free joints take angular velocity in the body frame: R^T omega, R = Rx Ry.
         cr, sr = np.cos(roll), np.sin(roll)
         ox, oy = omega_world[:, 0], omega_world[:, 1] * cr + omega_world[:, 2] * sr
@@ -318,12 +314,14 @@ class Physics(common.StatePhysics):
         qpos = np.zeros((n, self.model.nq))
         qvel = np.zeros((n, self.model.nv))
         root_q, root_v = self.joint_address("root")
-        qpos[:, root_q:root_q + 3] = pts["rear_centre"]
-        qpos[:, root_q + 3:root_q + 7] = quat
-        qvel[:, root_v:root_v + 3] = rear_velocity
-        qvel[:, root_v + 3:root_v + 6] = omega_body
+        qpos[:, root_q : root_q + 3] = pts["rear_centre"]
+        qpos[:, root_q + 3 : root_q + 7] = quat
+        qvel[:, root_v : root_v + 3] = rear_velocity
+        qvel[:, root_v + 3 : root_v + 6] = omega_body
         for joint, angle, rate in (
-            ("steer", steer, steer_rate), ("rear_wheel", 0.0, rear_spin), ("front_wheel", 0.0, front_spin),
+            ("steer", steer, steer_rate),
+            ("rear_wheel", 0.0, rear_spin),
+            ("front_wheel", 0.0, front_spin),
         ):
             q, v = self.joint_address(joint)
             qpos[:, q], qvel[:, v] = angle, rate
@@ -374,8 +372,9 @@ class Physics(common.StatePhysics):
 
 def control_vector(torque: Any, cg_offset: Any, speed: float) -> np.ndarray:
     """(N, 4) ctrl rows: handlebar torque (N m), CG offset d (m) twice, speed set-point (m/s)."""
-    torque, cg_offset = np.broadcast_arrays(np.atleast_1d(np.asarray(torque, np.float64)),
-                                            np.atleast_1d(np.asarray(cg_offset, np.float64)))
+    torque, cg_offset = np.broadcast_arrays(
+        np.atleast_1d(np.asarray(torque, np.float64)), np.atleast_1d(np.asarray(cg_offset, np.float64))
+    )
     return np.column_stack([torque, cg_offset, cg_offset, np.full(len(torque), float(speed))])
 
 
@@ -394,7 +393,10 @@ class Task(common.StateTask):
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:
         return specs.BoundedArray(
-            shape=(1,), dtype=np.float64, minimum=[-TORQUE_LIMIT], maximum=[TORQUE_LIMIT],
+            shape=(1,),
+            dtype=np.float64,
+            minimum=[-TORQUE_LIMIT],
+            maximum=[TORQUE_LIMIT],
             name="steer_torque",
         )
 
@@ -439,8 +441,11 @@ def balance(
     physics = Physics.from_xml_string(*model_xml(params))
     physics.set_target_speed(task.speed)
     return common.Environment(
-        physics, task, time_limit=time_limit,
-        control_timestep=CONTROL_TIMESTEP, **(environment_kwargs or {}),
+        physics,
+        task,
+        time_limit=time_limit,
+        control_timestep=CONTROL_TIMESTEP,
+        **(environment_kwargs or {}),
     )
 
 
@@ -448,6 +453,7 @@ TASKS = {"balance": balance}
 
 
 # --- Linear stability, measured on the MuJoCo model ---------------------------
+
 
 def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settle: float = 0.5) -> np.ndarray:
     """Eigenvalues (1/s) of the MuJoCo bicycle's lateral motion rolling straight at ``speed``.
@@ -511,7 +517,13 @@ def stability_window(
 def describe(task: str, **_: Any) -> TaskDescription:
     """The bicycle's static facts (see ``tatl_mj.description``)."""
     return TaskDescription(
-        domain="bicycle", task=task, state_names=("steer", "steer_rate", "roll", "roll_rate"),
-        periodic=(False,) * 4, action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
-        action_low=np.array([-TORQUE_LIMIT]), action_high=np.array([TORQUE_LIMIT]),
+        domain="bicycle",
+        task=task,
+        state_names=("steer", "steer_rate", "roll", "roll_rate"),
+        periodic=(False,) * 4,
+        action_values=ACTIONS,
+        discrete=False,
+        control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-TORQUE_LIMIT]),
+        action_high=np.array([TORQUE_LIMIT]),
     )

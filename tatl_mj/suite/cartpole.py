@@ -149,8 +149,11 @@ def balance(
     """Cart-pole balance; ``params`` changes the physical constants."""
     physics = Physics.from_xml_string(*model_xml(params))
     return common.Environment(
-        physics, Task(random=random), time_limit=time_limit,
-        control_timestep=CONTROL_TIMESTEP, **(environment_kwargs or {}),
+        physics,
+        Task(random=random),
+        time_limit=time_limit,
+        control_timestep=CONTROL_TIMESTEP,
+        **(environment_kwargs or {}),
     )
 
 
@@ -161,7 +164,13 @@ def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskD
     """The cart-pole's static facts (see ``tatl_mj.description``)."""
     limit = (params or CartPoleParams()).force_limit
     return TaskDescription(
-        domain="cartpole", task=task, state_names=("x", "x_dot", "theta", "theta_dot"),
-        periodic=(False,) * 4, action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
-        action_low=np.array([-limit]), action_high=np.array([limit]),
+        domain="cartpole",
+        task=task,
+        state_names=("x", "x_dot", "theta", "theta_dot"),
+        periodic=(False,) * 4,
+        action_values=ACTIONS,
+        discrete=False,
+        control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-limit]),
+        action_high=np.array([limit]),
     )

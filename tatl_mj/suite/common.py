@@ -18,9 +18,9 @@ from typing import Any
 
 import dm_env
 import numpy as np
+from dm_control.mujoco import engine
 from dm_control.rl import control
 from dm_control.suite import base
-from dm_control.mujoco import engine
 
 # tatl_mj/assets links to the repository's assets/ (and is a real folder in a wheel).
 MJCF_DIR = Path(__file__).resolve().parents[1] / "assets" / "mjcf"
@@ -50,6 +50,7 @@ def parse_model(filename: str, params: Any, params_type: type) -> tuple[Any, dic
 
 
 # --- Physical parameters ------------------------------------------------------
+
 
 def positive(default: float, doc: str = "") -> Any:
     """A dataclass field that must be a finite number > 0."""
@@ -99,6 +100,7 @@ def check_params(params: Any) -> None:
 
 
 # --- Physics and task ---------------------------------------------------------
+
 
 class StatePhysics(engine.Physics):
     """A Physics that speaks the paper's state vector.

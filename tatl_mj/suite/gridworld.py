@@ -177,8 +177,7 @@ def _action_index(action: Any) -> int:
     value = a.reshape(-1)[0] if a.size == 1 and np.issubdtype(a.dtype, np.number) else None
     if value is None or not np.isfinite(value) or value != int(value) or not 0 <= value < len(ACTIONS):
         raise ValueError(
-            f"gridworld action must be one of {list(range(len(ACTIONS)))} "
-            f"({', '.join(ACTION_NAMES)}), got {action!r}"
+            f"gridworld action must be one of {list(range(len(ACTIONS)))} ({', '.join(ACTION_NAMES)}), got {action!r}"
         )
     return int(value)
 
@@ -265,9 +264,7 @@ class GridWorld(dm_env.Environment):
         cell_indices(s[None])  # raises for an obstacle or a cell off the grid
         cell = (int(s[0]), int(s[1]))
         if cell == GOAL:
-            raise ValueError(
-                f"gridworld state {s} is the goal, which ends the episode; choose another free cell"
-            )
+            raise ValueError(f"gridworld state {s} is the goal, which ends the episode; choose another free cell")
         self._cell = cell
 
     @property
@@ -292,8 +289,12 @@ class GridWorld(dm_env.Environment):
         font = ImageFont.load_default(size=max(9, cell // 2))
 
         def box(row: int, col: int, inset: int = 0) -> tuple[int, int, int, int]:
-            return (x0 + col * cell + inset, y0 + row * cell + inset,
-                    x0 + (col + 1) * cell - 1 - inset, y0 + (row + 1) * cell - 1 - inset)
+            return (
+                x0 + col * cell + inset,
+                y0 + row * cell + inset,
+                x0 + (col + 1) * cell - 1 - inset,
+                y0 + (row + 1) * cell - 1 - inset,
+            )
 
         for row in range(N_ROWS):
             for col in range(N_COLS):
@@ -309,8 +310,11 @@ class GridWorld(dm_env.Environment):
                     for i in range(int(wind[col])):
                         cy = y0 + row * cell + cell // 4 + i * cell // 4
                         half = max(2, cell // 8)
-                        draw.line([(cx - half, cy + half), (cx, cy), (cx + half, cy + half)],
-                                  fill=(60, 100, 170), width=max(1, cell // 20))
+                        draw.line(
+                            [(cx - half, cy + half), (cx, cy), (cx + half, cy + half)],
+                            fill=(60, 100, 170),
+                            width=max(1, cell // 20),
+                        )
         for (row, col), fill, text in ((START, (255, 236, 170), "S"), (GOAL, (120, 200, 120), "G")):
             x_lo, y_lo, x_hi, y_hi = box(row, col)
             draw.rectangle((x_lo, y_lo, x_hi, y_hi), fill=fill, outline=(150, 150, 150))
@@ -320,8 +324,9 @@ class GridWorld(dm_env.Environment):
         def show(state: np.ndarray) -> np.ndarray:
             row, col = (int(v) for v in free_cells()[cell_indices(np.asarray(state)[None])[0]])
             image = Image.fromarray(background)
-            ImageDraw.Draw(image).ellipse(box(row, col, inset=max(1, cell // 6)),
-                                          fill=(230, 90, 40), outline=(120, 40, 10))
+            ImageDraw.Draw(image).ellipse(
+                box(row, col, inset=max(1, cell // 6)), fill=(230, 90, 40), outline=(120, 40, 10)
+            )
             return np.array(image)
 
         return show
@@ -356,8 +361,11 @@ def windy(
     """The windy grid world (the paper's target task)."""
     _check_environment_kwargs(environment_kwargs)
     return GridWorld(
-        windy=True, time_limit=time_limit, random=random,
-        random_start=random_start, stochastic_wind=stochastic_wind,
+        windy=True,
+        time_limit=time_limit,
+        random=random,
+        random_start=random_start,
+        stochastic_wind=stochastic_wind,
     )
 
 
@@ -372,8 +380,14 @@ def describe(task: str, stochastic_wind: bool = False, **_: Any) -> TaskDescript
     """
     windy = task == "windy"
     return TaskDescription(
-        domain="gridworld", task=task, state_names=("row", "col"), periodic=(False, False),
-        action_values=MOVES.astype(np.float64), discrete=True, control_timestep=None,
-        state_low=np.zeros(2), state_high=np.array([N_ROWS - 1.0, N_COLS - 1.0]),
+        domain="gridworld",
+        task=task,
+        state_names=("row", "col"),
+        periodic=(False, False),
+        action_values=MOVES.astype(np.float64),
+        discrete=True,
+        control_timestep=None,
+        state_low=np.zeros(2),
+        state_high=np.array([N_ROWS - 1.0, N_COLS - 1.0]),
         known_model=None if stochastic_wind else functools.partial(transition_model, windy=windy),
     )

@@ -291,7 +291,7 @@ def _build_hill(physics: Physics) -> None:
     columns = np.linspace(centre_x - half_length, centre_x + half_length, ncol)
     surface = np.interp(columns, s + radius * slope / norm, hill_height(s) + radius - radius / norm)
     start = int(physics.named.model.hfield_adr["hill"])
-    physics.model.hfield_data[start:start + nrow * ncol] = np.tile(surface / scale, nrow)
+    physics.model.hfield_data[start : start + nrow * ncol] = np.tile(surface / scale, nrow)
 
 
 def make_physics(params: MountainCarParams | None = None) -> Physics:
@@ -325,7 +325,10 @@ def climb(
     physics = make_physics(params)
     task = Climb(random=random)
     return common.Environment(
-        physics, task, time_limit=time_limit, control_timestep=CONTROL_TIMESTEP,
+        physics,
+        task,
+        time_limit=time_limit,
+        control_timestep=CONTROL_TIMESTEP,
         **(environment_kwargs or {}),
     )
 
@@ -336,8 +339,15 @@ TASKS = {"climb": climb}
 def describe(task: str, **_: Any) -> TaskDescription:
     """The mountain car's static facts (see ``tatl_mj.description``)."""
     return TaskDescription(
-        domain="mountain_car", task=task, state_names=("x", "v"), periodic=(False, False),
-        action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
-        action_low=np.array([-1.0]), action_high=np.array([1.0]),
-        state_low=np.array([SETTABLE_X[0], -np.inf]), state_high=np.array([SETTABLE_X[1], np.inf]),
+        domain="mountain_car",
+        task=task,
+        state_names=("x", "v"),
+        periodic=(False, False),
+        action_values=ACTIONS,
+        discrete=False,
+        control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-1.0]),
+        action_high=np.array([1.0]),
+        state_low=np.array([SETTABLE_X[0], -np.inf]),
+        state_high=np.array([SETTABLE_X[1], np.inf]),
     )

@@ -128,12 +128,16 @@ class Physics(common.StatePhysics):
         geometry at once.
         """
         for name, value in (("length", length), ("mass", mass)):
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-                    or not math.isfinite(value) or value <= 0:
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float, np.floating, np.integer))
+                or not math.isfinite(value)
+                or value <= 0
+            ):
                 raise ValueError(f"set_pendulum {name} must be a finite number > 0, got {value!r}")
         length, mass = float(length), float(mass)
         model = self.named.model
-        tip_inertia = 0.4 * mass * TIP_RADIUS ** 2
+        tip_inertia = 0.4 * mass * TIP_RADIUS**2
         model.body_mass["pole"] = mass
         model.body_inertia["pole"] = tip_inertia
         model.body_ipos["pole"] = (0.0, 0.0, length)
@@ -202,7 +206,10 @@ def _environment(
     physics: Physics, task: Task, time_limit: float, environment_kwargs: dict[str, Any] | None
 ) -> common.Environment:
     return common.Environment(
-        physics, task, time_limit=time_limit, control_timestep=CONTROL_TIMESTEP,
+        physics,
+        task,
+        time_limit=time_limit,
+        control_timestep=CONTROL_TIMESTEP,
         **(environment_kwargs or {}),
     )
 
@@ -272,7 +279,14 @@ def describe(task: str, params: PendulumParams | None = None, **_: Any) -> TaskD
     """
     limit = as_params(params).max_torque
     return TaskDescription(
-        domain="pendulum", task=task, state_names=("theta", "theta_dot"), periodic=(True, False),
-        angle_origin=(math.pi, 0.0), action_values=ACTIONS, discrete=False, control_timestep=CONTROL_TIMESTEP,
-        action_low=np.array([-limit]), action_high=np.array([limit]),
+        domain="pendulum",
+        task=task,
+        state_names=("theta", "theta_dot"),
+        periodic=(True, False),
+        angle_origin=(math.pi, 0.0),
+        action_values=ACTIONS,
+        discrete=False,
+        control_timestep=CONTROL_TIMESTEP,
+        action_low=np.array([-limit]),
+        action_high=np.array([limit]),
     )

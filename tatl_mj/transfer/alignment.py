@@ -164,8 +164,7 @@ def _standardiser(x: np.ndarray, name: str, whiten: bool) -> tuple[np.ndarray, n
         eigval, eigvec = np.linalg.eigh(cov)
         if eigval.min() <= 1e-12 * max(eigval.max(), 1e-300):
             raise ValueError(
-                f"{name} are rank-deficient (a constant or linearly dependent coordinate); "
-                "drop it before aligning"
+                f"{name} are rank-deficient (a constant or linearly dependent coordinate); drop it before aligning"
             )
         return mean, (eigvec / np.sqrt(eigval)) @ eigvec.T
     std = centred.std(axis=0)
@@ -278,9 +277,7 @@ def align_manifolds(
     zt = (xt - mean_t) @ white_t.T
 
     w = correspondences(zs, zt, n_neighbors, n_matches)
-    joint = scipy.sparse.bmat(
-        [[_knn_graph(zs, n_neighbors), mu * w], [mu * w.T, _knn_graph(zt, n_neighbors)]]
-    ).tocsr()
+    joint = scipy.sparse.bmat([[_knn_graph(zs, n_neighbors), mu * w], [mu * w.T, _knn_graph(zt, n_neighbors)]]).tocsr()
     degree = np.asarray(joint.sum(axis=1)).ravel()
     laplacian = scipy.sparse.diags(degree) - joint
     z = scipy.linalg.block_diag(zs, zt)  # (nS + nT, dS + dT) = Z^T
@@ -292,8 +289,13 @@ def align_manifolds(
     except np.linalg.LinAlgError as error:
         raise ValueError(f"manifold alignment eigenproblem is degenerate ({error}); check the samples") from error
     return LinearAlignment(
-        source_mean=mean_s, source_whitener=white_s, target_mean=mean_t, target_whitener=white_t,
-        alpha=gamma[:d_s], beta=gamma[d_s:], eigenvalues=eigenvalues,
+        source_mean=mean_s,
+        source_whitener=white_s,
+        target_mean=mean_t,
+        target_whitener=white_t,
+        alpha=gamma[:d_s],
+        beta=gamma[d_s:],
+        eigenvalues=eigenvalues,
     )
 
 
@@ -322,8 +324,13 @@ def _wrap(increments: np.ndarray, periodic: tuple[bool, ...] | None) -> np.ndarr
 
 
 def _consistency(
-    mapping: Mapping, target: Transitions, source_step: SourceStep, scale: np.ndarray | None,
-    rate: float | None, source_mask: tuple[bool, ...] | None, target_mask: tuple[bool, ...] | None,
+    mapping: Mapping,
+    target: Transitions,
+    source_step: SourceStep,
+    scale: np.ndarray | None,
+    rate: float | None,
+    source_mask: tuple[bool, ...] | None,
+    target_mask: tuple[bool, ...] | None,
 ) -> tuple[float, float]:
     """(score, rate) of :func:`dynamics_consistency`, the rate fitted when None."""
     x = mapping.chi_plus(target.states)
@@ -437,7 +444,7 @@ class _IncrementModel:
         z, z_next = (t.states - mean) @ white.T, (t.next_states - mean) @ white.T
         design = np.hstack([z, np.eye(n_actions)[t.actions]])
         theta, *_ = np.linalg.lstsq(design, z_next - z, rcond=None)
-        return _IncrementModel(mean, white, theta[: z.shape[1]].T, theta[z.shape[1]:])
+        return _IncrementModel(mean, white, theta[: z.shape[1]].T, theta[z.shape[1] :])
 
     def step(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
         z = (states - self.mean) @ self.white.T
@@ -469,7 +476,9 @@ def _consistent_map(f_s, e_s, f_t, e_t) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _model_candidates(
-    source: _IncrementModel, target: _IncrementModel, rates: tuple[float, ...],
+    source: _IncrementModel,
+    target: _IncrementModel,
+    rates: tuple[float, ...],
 ) -> list[tuple[str, AffineMapping]]:
     """One affine map per rate factor: the map that makes the two increment models agree."""
     unwhite_t = np.linalg.inv(target.white)
@@ -478,8 +487,9 @@ def _model_candidates(
         m_z, o_z = _consistent_map(rate * source.f, rate * source.e, target.f, target.e)
         # z_T = m_z z_S + o_z, written in state units.
         matrix = unwhite_t @ m_z @ source.white
-        candidates.append((f"model rate {rate:.4g}",
-                           AffineMapping(matrix, target.mean + unwhite_t @ o_z - matrix @ source.mean)))
+        candidates.append(
+            (f"model rate {rate:.4g}", AffineMapping(matrix, target.mean + unwhite_t @ o_z - matrix @ source.mean))
+        )
     return candidates
 
 
@@ -494,13 +504,20 @@ def _sign_flip_candidates(shared: LinearAlignment) -> list[tuple[str, AffineMapp
     for signs in itertools.product((1.0, -1.0), repeat=shared.alpha.shape[1]):
         m_z = np.linalg.pinv(shared.beta.T) @ (np.asarray(signs)[:, None] * shared.alpha.T)
         matrix = np.linalg.inv(shared.target_whitener) @ m_z @ shared.source_whitener
-        candidates.append((f"states signs {[int(s) for s in signs]}",
-                           AffineMapping(matrix, shared.target_mean - matrix @ shared.source_mean)))
+        candidates.append(
+            (
+                f"states signs {[int(s) for s in signs]}",
+                AffineMapping(matrix, shared.target_mean - matrix @ shared.source_mean),
+            )
+        )
     return candidates
 
 
 def _checked_pair(
-    source: Transitions, target: Transitions, n_source_actions: int, n_target_actions: int,
+    source: Transitions,
+    target: Transitions,
+    n_source_actions: int,
+    n_target_actions: int,
 ) -> int:
     """Validates the two batches against Assumption 1; returns the shared action count."""
     for name, value in (("source", source), ("target", target)):
@@ -574,8 +591,10 @@ def align_transitions(
     n_actions = _checked_pair(source, target, n_source_actions, n_target_actions)
     if not isinstance(settings, TransitionAlignment):
         raise ValueError(f"settings must be a TransitionAlignment, got {type(settings).__name__}")
-    masks = (periodic_mask(source_periodic, source.state_dim, "source_periodic"),
-             periodic_mask(target_periodic, target.state_dim, "target_periodic"))
+    masks = (
+        periodic_mask(source_periodic, source.state_dim, "source_periodic"),
+        periodic_mask(target_periodic, target.state_dim, "target_periodic"),
+    )
     source, target = _unwrapped(source, masks[0]), _unwrapped(target, masks[1])
     rng = rng if rng is not None else np.random.default_rng(0)
     if len(source) > settings.max_samples:
@@ -586,8 +605,14 @@ def align_transitions(
     source_model = _IncrementModel.fit(source, n_actions, "source")
     candidates = _model_candidates(source_model, _IncrementModel.fit(target, n_actions, "target"), settings.rates)
     if settings.sign_flips and min(source.state_dim, target.state_dim) <= 6:
-        shared = align_manifolds(source.states, target.states, n_neighbors=settings.n_neighbors,
-                                 mu=settings.mu, rng=rng, max_samples=settings.max_samples)
+        shared = align_manifolds(
+            source.states,
+            target.states,
+            n_neighbors=settings.n_neighbors,
+            mu=settings.mu,
+            rng=rng,
+            max_samples=settings.max_samples,
+        )
         candidates += _sign_flip_candidates(shared)
 
     step = source_step if source_step is not None else source_model.step
@@ -602,13 +627,26 @@ def align_transitions(
         raise ValueError("align_transitions: the source step rejected every candidate map's states")
     label, mapping = candidates[best]
     record = {
-        "kind": "transition_alignment", "matrix": mapping.matrix.tolist(), "offset": mapping.offset.tolist(),
-        "candidate": label, "rate": scores[best][1], "consistency": scores[best][0], "candidates": len(candidates),
+        "kind": "transition_alignment",
+        "matrix": mapping.matrix.tolist(),
+        "offset": mapping.offset.tolist(),
+        "candidate": label,
+        "rate": scores[best][1],
+        "consistency": scores[best][0],
+        "candidates": len(candidates),
     }
     return mapping, record
 
 
 __all__ = [
-    "AffineMapping", "IdentityMapping", "LinearAlignment", "Mapping", "TransitionAlignment", "align_manifolds",
-    "align_transitions", "correspondences", "dynamics_consistency", "local_geometry",
+    "AffineMapping",
+    "IdentityMapping",
+    "LinearAlignment",
+    "Mapping",
+    "TransitionAlignment",
+    "align_manifolds",
+    "align_transitions",
+    "correspondences",
+    "dynamics_consistency",
+    "local_geometry",
 ]

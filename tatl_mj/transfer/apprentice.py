@@ -127,7 +127,8 @@ def fit_apprentice(
     """Least-squares ``[W B] = argmin sum_i |s_{i+1} - [W B] psi(s_i, a_i)|^2``, psi = [phi(s); a].
 
     On ``periodic`` coordinates the target is the wrapped increment
-    ``wrap(s_{i+1} - s_i)`` instead of ``s_{i+1}`` (see the module docstring). With ``ridge = 0`` the regressors psi must have full column rank (enough samples,
+    ``wrap(s_{i+1} - s_i)`` instead of ``s_{i+1}`` (see the module docstring). With
+    ``ridge = 0`` the regressors psi must have full column rank (enough samples,
     the actions must vary, no basis function duplicating an action); otherwise a
     ValueError says which. ``ridge > 0`` solves the ridge problem instead.
     """
@@ -154,10 +155,15 @@ def fit_apprentice(
             )
         theta, _, rank, sv = np.linalg.lstsq(psi, s_next, rcond=None)
         if rank < p:
-            hint = "the actions do not vary" if np.linalg.matrix_rank(a - a.mean(axis=0)) < a.shape[1] else (
-                "the features are linearly dependent on these states"
+            hint = (
+                "the actions do not vary"
+                if np.linalg.matrix_rank(a - a.mean(axis=0)) < a.shape[1]
+                else ("the features are linearly dependent on these states")
             )
-            raise ValueError(f"apprentice regressors are rank-deficient (rank {rank} < {p}): {hint}; use ridge > 0 or more varied samples")
+            raise ValueError(
+                f"apprentice regressors are rank-deficient (rank {rank} < {p}): {hint}; "
+                "use ridge > 0 or more varied samples"
+            )
     else:
         theta = np.linalg.solve(psi.T @ psi + ridge * np.eye(p), psi.T @ s_next)
     k = phi.shape[1]
@@ -205,9 +211,7 @@ def learn_apprentice(
     for n in sizes:
         part = transitions.head(n)
         try:
-            apprentice = fit_apprentice(
-                part.states, actions[part.actions], part.next_states, features, ridge, periodic
-            )
+            apprentice = fit_apprentice(part.states, actions[part.actions], part.next_states, features, ridge, periodic)
         except ValueError as error:  # too few or too uniform samples yet: grow the set
             last_error = error
             continue
@@ -220,7 +224,8 @@ def learn_apprentice(
         raise ValueError(f"no apprentice could be fitted on all {total} samples: {last_error}")
     warnings.warn(
         f"apprentice stopping rule |U_M - U_Mhat| <= {zeta} not met with all {total} samples",
-        RuntimeWarning, stacklevel=2,
+        RuntimeWarning,
+        stacklevel=2,
     )
     return apprentice, total
 

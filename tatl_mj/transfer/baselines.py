@@ -49,8 +49,13 @@ def uma_tl(
     if source_q.n_actions != n_actions:
         raise ValueError(f"source_q has {source_q.n_actions} actions, the target has n_actions={n_actions}")
     return fitted_q_iteration(
-        target_transitions, n_actions, regressor, gamma, iterations,
-        initial_q=MappedQ(source_q, mapping), rng=rng,
+        target_transitions,
+        n_actions,
+        regressor,
+        gamma,
+        iterations,
+        initial_q=MappedQ(source_q, mapping),
+        rng=rng,
     )
 
 

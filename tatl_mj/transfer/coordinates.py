@@ -51,8 +51,7 @@ class Coordinates:
         origin = np.asarray(self.origin, dtype=np.float64).ravel()
         if origin.shape != (len(periodic),):
             raise ValueError(
-                f"Coordinates.origin must hold one number per state coordinate ({len(periodic)}), "
-                f"got {self.origin!r}"
+                f"Coordinates.origin must hold one number per state coordinate ({len(periodic)}), got {self.origin!r}"
             )
         if not np.all(np.isfinite(origin)):
             raise ValueError(f"Coordinates.origin must be finite, got {self.origin!r}")
@@ -91,13 +90,17 @@ class Coordinates:
     def transitions(self, batch: Transitions) -> Transitions:
         """``batch`` with states and next states in mapping coordinates (the rest unchanged)."""
         return dataclasses.replace(
-            batch, states=self.to_mapping(batch.states), next_states=self.to_mapping(batch.next_states),
+            batch,
+            states=self.to_mapping(batch.states),
+            next_states=self.to_mapping(batch.next_states),
         )
 
     def step(self, step: SourceStep) -> SourceStep:
         """A batched step function on domain states, seen in mapping coordinates."""
+
         def in_coordinates(coords: np.ndarray, actions: np.ndarray) -> np.ndarray:
             return self.to_mapping(step(self.from_mapping(coords), actions))
+
         return in_coordinates
 
 
@@ -120,9 +123,7 @@ class InCoordinates:
 
     def __post_init__(self) -> None:
         if not isinstance(self.inner, Mapping):
-            raise ValueError(
-                f"InCoordinates.inner must be a Mapping (chi, chi_plus), got {type(self.inner).__name__}"
-            )
+            raise ValueError(f"InCoordinates.inner must be a Mapping (chi, chi_plus), got {type(self.inner).__name__}")
         for name in ("source", "target"):
             if not isinstance(getattr(self, name), Coordinates):
                 kind = type(getattr(self, name)).__name__
@@ -162,13 +163,21 @@ def align_in_coordinates(
             )
     step: SourceStep | None = None if source_step is None else source_coordinates.step(source_step)
     inner, record = align_transitions(
-        source_coordinates.transitions(source), target_coordinates.transitions(target),
-        n_source_actions, n_target_actions,
-        source_periodic=source_coordinates.periodic, target_periodic=target_coordinates.periodic,
-        source_step=step, settings=settings, rng=rng,
+        source_coordinates.transitions(source),
+        target_coordinates.transitions(target),
+        n_source_actions,
+        n_target_actions,
+        source_periodic=source_coordinates.periodic,
+        target_periodic=target_coordinates.periodic,
+        source_step=step,
+        settings=settings,
+        rng=rng,
     )
-    record = dict(record, source_coordinates=dataclasses.asdict(source_coordinates),
-                  target_coordinates=dataclasses.asdict(target_coordinates))
+    record = dict(
+        record,
+        source_coordinates=dataclasses.asdict(source_coordinates),
+        target_coordinates=dataclasses.asdict(target_coordinates),
+    )
     return InCoordinates(inner, source_coordinates, target_coordinates), record
 
 

@@ -28,7 +28,6 @@ from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-
 TWO_PI = 2.0 * np.pi
 
 
@@ -204,9 +203,9 @@ class RBF:
         rows = max(1, (1 << 21) // (k * d))
         out = np.empty((len(s), k))
         for start in range(0, len(s), rows):
-            diff = periodic_difference(s[start:start + rows, None, :], self.centers[None, :, :], self.periodic)
+            diff = periodic_difference(s[start : start + rows, None, :], self.centers[None, :, :], self.periodic)
             z = diff @ self._inverse.T
-            out[start:start + rows] = np.einsum("nkd,nkd->nk", z, z)
+            out[start : start + rows] = np.einsum("nkd,nkd->nk", z, z)
         return out
 
 
@@ -266,7 +265,7 @@ class LinearFeatures:
         self._check_dim(s.shape[1])
         if self.periodic is not None:
             columns = [
-                np.stack([np.sin(s[:, j]), np.cos(s[:, j])], axis=1) if p else s[:, j:j + 1]
+                np.stack([np.sin(s[:, j]), np.cos(s[:, j])], axis=1) if p else s[:, j : j + 1]
                 for j, p in enumerate(self.periodic)
             ]
             s = np.hstack(columns)
@@ -371,6 +370,14 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
 
 
 __all__ = [
-    "FEATURE_KINDS", "Features", "LinearFeatures", "OneHot", "RBF", "as_states", "make_features",
-    "periodic_difference", "periodic_mask", "wrap_angle",
+    "FEATURE_KINDS",
+    "Features",
+    "LinearFeatures",
+    "OneHot",
+    "RBF",
+    "as_states",
+    "make_features",
+    "periodic_difference",
+    "periodic_mask",
+    "wrap_angle",
 ]

@@ -58,6 +58,7 @@ def _argmax(values: np.ndarray) -> np.ndarray:
 
 # --- Regressors (configurations) ---------------------------------------------
 
+
 @dataclasses.dataclass(frozen=True)
 class LinearRegressor:
     """Linear-in-features Q: ``Q(s, a) = w_a . phi(s)``, fitted by ridge least squares.
@@ -134,6 +135,7 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
 
 # --- Fitted Q-functions -------------------------------------------------------
 
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class LinearQ:
     """``Q(s, a) = weights[a] . features(s)``; weights (n_actions, k)."""
@@ -185,6 +187,7 @@ class ZeroQ:
 
 # --- FQI ----------------------------------------------------------------------
 
+
 def _check_fqi_inputs(
     transitions: Transitions, n_actions: int, gamma: float, iterations: int, initial_q: QFunction | None
 ) -> None:
@@ -229,9 +232,7 @@ def fitted_q_iteration(
         else:
             seed = int(rng.integers(2**31 - 1)) if rng is not None else 0
         return _fqi_trees(transitions, int(n_actions), regressor, gamma, int(iterations), q0, seed)
-    raise ValueError(
-        f"regressor must be a LinearRegressor or ExtraTreesRegressor, got {type(regressor).__name__}"
-    )
+    raise ValueError(f"regressor must be a LinearRegressor or ExtraTreesRegressor, got {type(regressor).__name__}")
 
 
 def _unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -280,20 +281,22 @@ def _fqi_linear(
     # An iteration is a few memory-bound matrix-vector products: BLAS threads only add
     # synchronisation (mountain car source, 2 cores: 19 s with 2 threads, 6.5 s with 1).
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
-        weights = iterate(t, n_actions, gamma, iterations, factors, phi_states, state_of,
-                          phi_next, next_of, next_values)
+        weights = iterate(
+            t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values
+        )
     return LinearQ(reg.features, weights)
 
 
-def _iterate_on_samples(t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of,
-                        next_values) -> np.ndarray:
+def _iterate_on_samples(
+    t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values
+) -> np.ndarray:
     """FQI sample by sample: per iteration one pass over the next-state features and one
     over the state features (both stored action-block-contiguous, transposed, so each
     product is one BLAS call with a long inner dimension)."""
     order = np.argsort(t.actions, kind="stable")
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
     blocks = [slice(int(bounds[a]), int(bounds[a + 1])) for a in range(n_actions)]
-    phi_t = np.ascontiguousarray(phi_states[state_of[order]].T)    # (k, N)
+    phi_t = np.ascontiguousarray(phi_states[state_of[order]].T)  # (k, N)
     phi_next_t = np.ascontiguousarray(phi_next[next_of[order]].T)  # (k, N)
     rewards = t.rewards[order]
     continues = gamma * (~t.absorbing[order])
@@ -307,8 +310,9 @@ def _iterate_on_samples(t, n_actions, gamma, iterations, factors, phi_states, st
     return weights
 
 
-def _iterate_on_model(t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of,
-                      next_values) -> np.ndarray:
+def _iterate_on_model(
+    t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values
+) -> np.ndarray:
     """FQI on the empirical model: with V distinct next states, Phi_a^T y_a =
     Phi_a^T r_a + gamma * S_a max_b Q(nexts, b), where S_a (k, V) sums the state features
     of action a's non-absorbing samples by next state; an iteration costs O(A k V), not O(N k).
@@ -326,7 +330,7 @@ def _iterate_on_model(t, n_actions, gamma, iterations, factors, phi_states, stat
     spread = np.empty((n_actions, k, n_next))
     for a in range(n_actions):
         base[a] = phi_states.T @ reward_sums[a]
-        spread[a] = gamma * (flows[a * n_states:(a + 1) * n_states].T @ phi_states).T
+        spread[a] = gamma * (flows[a * n_states : (a + 1) * n_states].T @ phi_states).T
     weights = np.zeros((n_actions, k))
     best_next = next_values.max(axis=1)
     for _ in range(iterations):
@@ -337,8 +341,13 @@ def _iterate_on_model(t, n_actions, gamma, iterations, factors, phi_states, stat
 
 
 def _fqi_trees(
-    t: Transitions, n_actions: int, reg: ExtraTreesRegressor, gamma: float, iterations: int,
-    q0: QFunction, seed: int,
+    t: Transitions,
+    n_actions: int,
+    reg: ExtraTreesRegressor,
+    gamma: float,
+    iterations: int,
+    q0: QFunction,
+    seed: int,
 ) -> TreeQ:
     missing = sorted(set(range(n_actions)) - set(np.unique(t.actions).tolist()))
     if missing:
@@ -363,6 +372,7 @@ def _fqi_trees(
 
 
 # --- Exact Q-iteration on a tabular model -------------------------------------
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TabularQ:
@@ -408,7 +418,9 @@ class TabularQ:
         rc = as_states(s, dim=2)
         cells = np.rint(rc).astype(np.int64)
         lookup = self._lookup
-        inside = (cells[:, 0] >= 0) & (cells[:, 0] < lookup.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < lookup.shape[1])
+        inside = (
+            (cells[:, 0] >= 0) & (cells[:, 0] < lookup.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < lookup.shape[1])
+        )
         if np.any(np.abs(rc - cells) > 1e-9) or not np.all(inside):
             raise ValueError("TabularQ states must be [row, col] cells of the grid")
         idx = lookup[cells[:, 0], cells[:, 1]]
@@ -441,9 +453,7 @@ def q_iteration(
     r = np.asarray(reward, dtype=np.float64)
     done = np.asarray(absorbing, dtype=bool)
     if nxt.ndim != 2 or r.shape != nxt.shape or done.shape != nxt.shape:
-        raise ValueError(
-            f"next_state, reward, absorbing must all be (S, A); got {nxt.shape}, {r.shape}, {done.shape}"
-        )
+        raise ValueError(f"next_state, reward, absorbing must all be (S, A); got {nxt.shape}, {r.shape}, {done.shape}")
     if not np.all(np.isfinite(r)):
         raise ValueError("reward contains NaN or infinite values")
     if np.any(nxt != np.rint(nxt)) or nxt.min() < 0 or nxt.max() >= len(nxt):
@@ -468,6 +478,16 @@ def q_iteration(
 
 
 __all__ = [
-    "ExtraTreesRegressor", "LinearQ", "LinearRegressor", "QFunction", "REGRESSOR_KINDS", "Regressor",
-    "TabularQ", "TreeQ", "ZeroQ", "fitted_q_iteration", "make_regressor", "q_iteration",
+    "ExtraTreesRegressor",
+    "LinearQ",
+    "LinearRegressor",
+    "QFunction",
+    "REGRESSOR_KINDS",
+    "Regressor",
+    "TabularQ",
+    "TreeQ",
+    "ZeroQ",
+    "fitted_q_iteration",
+    "make_regressor",
+    "q_iteration",
 ]

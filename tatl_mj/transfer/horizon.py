@@ -153,7 +153,13 @@ class HorizonTATLPolicy:
             raise ValueError("model must be callable (states (N, d), action values (N, m)) -> (N, d)")
         low = np.atleast_1d(np.asarray(self.target_low, dtype=np.float64)).ravel()
         high = np.atleast_1d(np.asarray(self.target_high, dtype=np.float64)).ravel()
-        if low.size == 0 or low.shape != high.shape or np.any(np.isnan(low)) or np.any(np.isnan(high)) or np.any(low > high):
+        if (
+            low.size == 0
+            or low.shape != high.shape
+            or np.any(np.isnan(low))
+            or np.any(np.isnan(high))
+            or np.any(low > high)
+        ):
             raise ValueError(
                 f"target_low must be <= target_high, one entry per action column each, "
                 f"got {self.target_low!r} and {self.target_high!r}"
@@ -164,13 +170,19 @@ class HorizonTATLPolicy:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
             raise ValueError(f"horizon must be a positive integer (target steps), got {self.horizon!r}")
         ratio = self.step_ratio
-        if isinstance(ratio, bool) or not isinstance(ratio, (int, float, np.number)) or not (math.isfinite(ratio) and ratio > 0):
+        if (
+            isinstance(ratio, bool)
+            or not isinstance(ratio, (int, float, np.number))
+            or not (math.isfinite(ratio) and ratio > 0)
+        ):
             raise ValueError(f"step_ratio must be a finite number > 0 (dt_source / dt_target), got {ratio!r}")
         object.__setattr__(self, "step_ratio", float(ratio))
         if self.weights is not None:
             w = np.asarray(self.weights, dtype=np.float64)
             if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
-                raise ValueError(f"weights must be a (d,) vector of finite numbers >= 0, not all 0, got {self.weights!r}")
+                raise ValueError(
+                    f"weights must be a (d,) vector of finite numbers >= 0, not all 0, got {self.weights!r}"
+                )
             object.__setattr__(self, "weights", w)
         if self.reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
@@ -183,7 +195,9 @@ class HorizonTATLPolicy:
             actions = np.asarray(self.target_actions, dtype=np.float64)
             actions = actions[:, None] if actions.ndim == 1 else actions
             if actions.ndim != 2 or actions.shape[1] != m or not np.all(np.isfinite(actions)):
-                raise ValueError(f"target_actions must be a finite (n, {m}) array, got shape {np.shape(self.target_actions)}")
+                raise ValueError(
+                    f"target_actions must be a finite (n, {m}) array, got shape {np.shape(self.target_actions)}"
+                )
             if self.source_q.n_actions != len(actions):
                 raise ValueError(
                     f"source_q has {self.source_q.n_actions} actions, target_actions has {len(actions)} (Assumption 1)"
@@ -276,15 +290,15 @@ class HorizonTATLPolicy:
         root = np.sqrt(weights)
         gap = root * periodic_difference(free, references, self.periodic)  # (N, H, d)
         rows = (root[None, None, :, None] * control).reshape(n, self.horizon * d, m)
-        adaptive = -_least_squares(rows, gap.reshape(n, self.horizon * d), root.max() * np.abs(control).max(axis=(1, 2, 3)))
+        adaptive = -_least_squares(
+            rows, gap.reshape(n, self.horizon * d), root.max() * np.abs(control).max(axis=(1, 2, 3))
+        )
         action = np.clip(nominal + adaptive, self.target_low, self.target_high)
         return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         """(N, dT) target states -> (N, mT) target action values."""
         return self.step(target_states).action
-
-
 
 
 def linearised(step: TargetModel, state_dim: int, action_dim: int, width: float = 1e-4) -> TargetModel:
@@ -294,6 +308,7 @@ def linearised(step: TargetModel, state_dim: int, action_dim: int, width: float 
     its noise afresh from a fixed seed on every call (``sampling.step_values_from``)
     sees the same noise in each difference, and it cancels.
     """
+
     def query(state: np.ndarray, action: np.ndarray) -> np.ndarray:
         return np.asarray(step(state[None], action[None]), dtype=np.float64)[0]
 
@@ -351,10 +366,13 @@ class HorizonTATL(TATL):
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
             raise ValueError(f"{owner}.horizon must be an integer >= 1 (target steps), got {self.horizon!r}")
         if self.step_ratio is not None and (
-            isinstance(self.step_ratio, bool) or not isinstance(self.step_ratio, (int, float))
+            isinstance(self.step_ratio, bool)
+            or not isinstance(self.step_ratio, (int, float))
             or not (math.isfinite(self.step_ratio) and self.step_ratio > 0)
         ):
-            raise ValueError(f"{owner}.step_ratio must be a number > 0 (dt_source / dt_target), got {self.step_ratio!r}")
+            raise ValueError(
+                f"{owner}.step_ratio must be a number > 0 (dt_source / dt_target), got {self.step_ratio!r}"
+            )
         w = np.asarray(self.weights, dtype=np.float64) if self.weights else None
         if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0)):
             raise ValueError(f"{owner}.weights must be numbers >= 0, not all 0, got {self.weights!r}")
@@ -394,15 +412,27 @@ class HorizonTATL(TATL):
         ratio = self.step_ratio
         if ratio is None:
             ratio = problem.source.control_timestep / target.control_timestep
-        source = dict(
-            source_q=problem.source_q, mapping=problem.mapping, source_step=problem.source_step,
-            target_actions=target.action_values,
-        ) if self.reference == "source" else {}
+        source = (
+            dict(
+                source_q=problem.source_q,
+                mapping=problem.mapping,
+                source_step=problem.source_step,
+                target_actions=target.action_values,
+            )
+            if self.reference == "source"
+            else {}
+        )
         return HorizonTATLPolicy(
-            model, target.action_low, target.action_high, horizon=self.horizon, step_ratio=ratio,
+            model,
+            target.action_low,
+            target.action_high,
+            horizon=self.horizon,
+            step_ratio=ratio,
             weights=np.asarray(self.weights, dtype=np.float64) if self.weights else None,
-            reference=self.reference, periodic=periodic if periodic and any(periodic) else None,
-            samples_used=used, **source,
+            reference=self.reference,
+            periodic=periodic if periodic and any(periodic) else None,
+            samples_used=used,
+            **source,
         )
 
 

@@ -140,8 +140,16 @@ def _check_choice(owner: str, field: str, value: Any, valid: tuple) -> None:
         raise ValueError(f"{owner}.{field} is {value!r}; valid choices: {list(valid)}")
 
 
-def _check_number(owner: str, field: str, value: Any, low: float, high: float = math.inf,
-                  low_open: bool = False, high_open: bool = False, integer: bool = False) -> None:
+def _check_number(
+    owner: str,
+    field: str,
+    value: Any,
+    low: float,
+    high: float = math.inf,
+    low_open: bool = False,
+    high_open: bool = False,
+    integer: bool = False,
+) -> None:
     kind = "an integer" if integer else "a number"
     ok_type = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
     if isinstance(value, bool) or not ok_type or not math.isfinite(value):
@@ -180,9 +188,11 @@ class GreedyPolicy:
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         idx = self.q.greedy(target_states)
-        return idx if self.discrete else np.asarray(self.target_actions, dtype=np.float64).reshape(
-            len(self.target_actions), -1
-        )[idx]
+        return (
+            idx
+            if self.discrete
+            else np.asarray(self.target_actions, dtype=np.float64).reshape(len(self.target_actions), -1)[idx]
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,13 +245,23 @@ class TATL:
         periodic = target.periodic if any(target.periodic) else None
         if self.zeta is None or not problem.has_utility_gap:
             apprentice = fit_apprentice(
-                target_samples.states, actions[target_samples.actions], target_samples.next_states,
-                self.features(target), self.ridge, periodic=periodic,
+                target_samples.states,
+                actions[target_samples.actions],
+                target_samples.next_states,
+                self.features(target),
+                self.ridge,
+                periodic=periodic,
             )
             return apprentice, len(target_samples)
         return learn_apprentice(
-            target_samples, actions, self.features(target), problem.utility_gap, self.zeta,
-            self.batch or len(target_samples), self.ridge, periodic=periodic,
+            target_samples,
+            actions,
+            self.features(target),
+            problem.utility_gap,
+            self.zeta,
+            self.batch or len(target_samples),
+            self.ridge,
+            periodic=periodic,
         )
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
@@ -249,10 +269,16 @@ class TATL:
         target = problem.target
         adaptive = np.asarray(self.adaptive_actions, dtype=np.float64).reshape(-1, 1) if self.adaptive_actions else None
         common = dict(
-            source_q=problem.source_q, mapping=problem.mapping, source_step=problem.source_step,
-            apprentice=apprentice, source_actions=problem.source.action_values, target_actions=target.action_values,
-            target_low=target.action_low, target_high=target.action_high,
-            adaptive_actions=adaptive, samples_used=used,
+            source_q=problem.source_q,
+            mapping=problem.mapping,
+            source_step=problem.source_step,
+            apprentice=apprentice,
+            source_actions=problem.source.action_values,
+            target_actions=target.action_values,
+            target_low=target.action_low,
+            target_high=target.action_high,
+            adaptive_actions=adaptive,
+            samples_used=used,
         )
         return DiscreteTATLPolicy(**common) if target.discrete else TATLPolicy(**common)
 
@@ -277,12 +303,14 @@ class TargetFQI:
         refused for extra-trees, which split raw states.
       regressor: ``"linear"`` or ``"extra_trees"``.
       ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
+      n_estimators: extra-trees' tree count (default 50); refused for linear.
       gamma, iterations: FQI's discount and iteration count.
     """
 
     features: dict | None = None
     regressor: str = "linear"
     ridge: float | None = None
+    n_estimators: int | None = None
     gamma: float = 0.95
     iterations: int = 20
     name: str = "target-fqi"
@@ -294,6 +322,10 @@ class TargetFQI:
         for field in ("ridge", "features"):
             if getattr(self, field) is not None and self.regressor != "linear":
                 raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
+        if self.n_estimators is not None:
+            if self.regressor != "extra_trees":
+                raise ValueError(f"{owner}.n_estimators applies to regressor 'extra_trees' only")
+            _check_number(owner, "n_estimators", self.n_estimators, 1, integer=True)
         if self.ridge is not None:
             _check_number(owner, "ridge", self.ridge, 0.0)
         if self.regressor == "linear":
@@ -313,14 +345,24 @@ class TargetFQI:
         spec: dict = {"kind": self.regressor, "features": self.linear_features}
         if self.regressor == "linear":
             spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
+        elif self.n_estimators is not None:
+            spec["n_estimators"] = self.n_estimators
         return spec
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
         regressor = make_regressor(self.regressor_spec(), target_samples.state_dim)
         rng = np.random.default_rng(problem.seed)
         if self.from_source:
-            q = uma_tl(problem.source_q, problem.mapping, target_samples, problem.n_actions, regressor,
-                       self.gamma, self.iterations, rng=rng)
+            q = uma_tl(
+                problem.source_q,
+                problem.mapping,
+                target_samples,
+                problem.n_actions,
+                regressor,
+                self.gamma,
+                self.iterations,
+                rng=rng,
+            )
         else:
             q = rl(target_samples, problem.n_actions, regressor, self.gamma, self.iterations, rng=rng)
         return GreedyPolicy(q, problem.target.action_values, problem.target.discrete)
@@ -342,6 +384,15 @@ class RL(TargetFQI):
 
 
 __all__ = [
-    "GreedyPolicy", "Model", "Policy", "ProjectedSource", "RL", "TATL", "TargetFQI", "TransferMethod", "TransferProblem", "UMATL",
+    "GreedyPolicy",
+    "Model",
+    "Policy",
+    "ProjectedSource",
+    "RL",
+    "TATL",
+    "TargetFQI",
+    "TransferMethod",
+    "TransferProblem",
+    "UMATL",
     "check_features",
 ]

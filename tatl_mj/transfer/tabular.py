@@ -51,7 +51,6 @@ Nothing here knows a particular domain: a domain provides its known model as
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
 
 import numpy as np
 
@@ -68,6 +67,7 @@ PRIOR_SCOPES = ("agreeing-cells", "unvisited")
 
 
 # --- Cells and models -------------------------------------------------------------
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class CellMap:
@@ -182,9 +182,7 @@ def uninformed_model(n_cells: int, n_actions: int) -> TabularModel:
     return TabularModel(stay, np.zeros((n_cells, n_actions)), np.zeros((n_cells, n_actions), dtype=bool))
 
 
-def mapped_model(
-    source: TabularModel, source_cells: CellMap, target_cells: CellMap, mapping: Mapping
-) -> TabularModel:
+def mapped_model(source: TabularModel, source_cells: CellMap, target_cells: CellMap, mapping: Mapping) -> TabularModel:
     """The source model carried to the target's cells through chi / chi_plus.
 
     Target cell c stands for the source cell nearest ``chi_plus(c)``; its action a
@@ -197,11 +195,14 @@ def mapped_model(
     s_of_t = source_cells.nearest(mapping.chi_plus(target_cells.cells.astype(np.float64)))
     t_of_s = target_cells.nearest(mapping.chi(source_cells.cells.astype(np.float64)))
     return TabularModel(
-        t_of_s[source.next_state[s_of_t]], source.reward[s_of_t], source.absorbing[s_of_t],
+        t_of_s[source.next_state[s_of_t]],
+        source.reward[s_of_t],
+        source.absorbing[s_of_t],
     )
 
 
 # --- The tabular apprentice -------------------------------------------------------
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TabularApprentice:
@@ -271,11 +272,13 @@ class TabularApprentice:
             differs = visited & ((nxt != fb.next_state) | (seen_reward != fb.reward) | (seen_absorbing != fb.absorbing))
             distrusted = differs.any(axis=1, keepdims=True) & ~visited
             fb = TabularModel(
-                np.where(distrusted, cell, fb.next_state), np.where(distrusted, 0.0, fb.reward),
+                np.where(distrusted, cell, fb.next_state),
+                np.where(distrusted, 0.0, fb.reward),
                 fb.absorbing & ~distrusted,
             )
         return TabularModel(
-            np.where(visited, nxt, fb.next_state), np.where(visited, seen_reward, fb.reward),
+            np.where(visited, nxt, fb.next_state),
+            np.where(visited, seen_reward, fb.reward),
             np.where(visited, seen_absorbing, fb.absorbing),
         )
 
@@ -290,7 +293,10 @@ class TabularApprentice:
 
 
 def fit_tabular_apprentice(
-    samples: Transitions, cell_map: CellMap, fallback: TabularModel, prior_scope: str = "agreeing-cells",
+    samples: Transitions,
+    cell_map: CellMap,
+    fallback: TabularModel,
+    prior_scope: str = "agreeing-cells",
 ) -> TabularApprentice:
     """Counts ``samples`` (states and next states must be cells of ``cell_map``);
     ``prior_scope`` as in :class:`TabularApprentice`."""
@@ -300,9 +306,13 @@ def fit_tabular_apprentice(
     shape = (n_cells, n_actions, n_cells)
     if len(samples) and (samples.actions.min() < 0 or samples.actions.max() >= n_actions):
         raise ValueError(f"samples.actions must be in 0..{n_actions - 1}")
-    flat = np.ravel_multi_index(
-        (cell_map.index(samples.states), samples.actions, cell_map.index(samples.next_states)), shape
-    ) if len(samples) else np.zeros(0, np.int64)
+    flat = (
+        np.ravel_multi_index(
+            (cell_map.index(samples.states), samples.actions, cell_map.index(samples.next_states)), shape
+        )
+        if len(samples)
+        else np.zeros(0, np.int64)
+    )
     size = n_cells * n_actions * n_cells
     return TabularApprentice(
         counts=np.bincount(flat, minlength=size).reshape(shape).astype(np.int64),
@@ -314,6 +324,7 @@ def fit_tabular_apprentice(
 
 
 # --- ta-tl-replan -----------------------------------------------------------------
+
 
 @dataclasses.dataclass(frozen=True)
 class ReplanStep:
@@ -367,7 +378,10 @@ class ReplanPolicy:
 
 
 def replan(
-    apprentice: TabularApprentice, cell_map: CellMap, gamma: float, samples_used: int | None = None,
+    apprentice: TabularApprentice,
+    cell_map: CellMap,
+    gamma: float,
+    samples_used: int | None = None,
     tol: float = 1e-10,
 ) -> ReplanPolicy:
     """``ta-tl-replan``: exact Q-iteration on the apprentice's model with its fallback."""
@@ -378,6 +392,7 @@ def replan(
 
 
 # --- The one-step rule with a tabular model (the oracle ablation) ----------------------
+
 
 @dataclasses.dataclass(frozen=True)
 class OneStepDecision:
@@ -435,6 +450,7 @@ class OneStepRule:
 
 
 # --- Methods -------------------------------------------------------------------------
+
 
 def _target_cells(problem: TransferProblem) -> np.ndarray:
     """The target's cells (its state set): from its description's known model where it has
@@ -495,8 +511,9 @@ class ReplanTATL:
         n_actions = problem.target.n_actions
         if self.source_prior:
             next_state, reward, absorbing, source_cells = problem.source.known_model()
-            fallback = mapped_model(TabularModel(next_state, reward, absorbing), CellMap(source_cells), cells,
-                                    problem.mapping)
+            fallback = mapped_model(
+                TabularModel(next_state, reward, absorbing), CellMap(source_cells), cells, problem.mapping
+            )
         else:
             fallback = uninformed_model(cells.n_cells, n_actions)
         samples = target_samples
@@ -522,18 +539,35 @@ class OneStepOracle:
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         if target.known_model is None:
-            raise ValueError(f"{type(self).__name__} needs the target's known model; "
-                             f"{target.domain}/{target.task} has none")
+            raise ValueError(
+                f"{type(self).__name__} needs the target's known model; {target.domain}/{target.task} has none"
+            )
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> OneStepRule:
         self.check(problem.source, problem.target)
         next_state, reward, absorbing, cells = problem.target.known_model()
-        return OneStepRule(problem.source_q, problem.mapping, problem.source_step,
-                           TabularModel(next_state, reward, absorbing), CellMap(cells))
+        return OneStepRule(
+            problem.source_q,
+            problem.mapping,
+            problem.source_step,
+            TabularModel(next_state, reward, absorbing),
+            CellMap(cells),
+        )
 
 
 __all__ = [
-    "PRIOR_SCOPES", "CellMap", "OneStepDecision", "OneStepRule", "ReplanPolicy", "ReplanStep", "TabularApprentice",
-    "OneStepOracle", "ReplanTATL", "TabularModel", "fit_tabular_apprentice", "mapped_model", "replan",
+    "PRIOR_SCOPES",
+    "CellMap",
+    "OneStepDecision",
+    "OneStepRule",
+    "ReplanPolicy",
+    "ReplanStep",
+    "TabularApprentice",
+    "OneStepOracle",
+    "ReplanTATL",
+    "TabularModel",
+    "fit_tabular_apprentice",
+    "mapped_model",
+    "replan",
     "uninformed_model",
 ]

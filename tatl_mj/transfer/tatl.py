@@ -88,9 +88,7 @@ def _check_common(policy: "TATLPolicy | DiscreteTATLPolicy") -> None:
         raise ValueError("source_step must be callable (states (N, dS), action indices (N,)) -> (N, dS)")
     n_s, n_t = len(policy.source_actions), len(policy.target_actions)
     if n_s != n_t:
-        raise ValueError(
-            f"source_actions ({n_s}) and target_actions ({n_t}) must have the same count (Assumption 1)"
-        )
+        raise ValueError(f"source_actions ({n_s}) and target_actions ({n_t}) must have the same count (Assumption 1)")
     if policy.source_q.n_actions != n_s:
         raise ValueError(f"source_q has {policy.source_q.n_actions} actions, source_actions has {n_s}")
 
