@@ -259,7 +259,7 @@ def _check_source_learning(spec: ExperimentSpec, description: Any) -> None:
         raise SpecError(f"{p}: key 'source_learning.ridge' applies to regressor 'linear' only")
     try:
         fqi.make_regressor(learner.regressor_spec(), description.state_dim)
-    except ValueError as error:
+    except (TypeError, ValueError) as error:
         raise SpecError(f"{p}: key 'source_learning.features': {error}") from None
 
 
@@ -320,7 +320,7 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
             check = getattr(method, "check", None)
             if check is not None:
                 check(source, target)
-        except ValueError as error:
+        except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
 
 

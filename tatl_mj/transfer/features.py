@@ -331,8 +331,15 @@ def make_features(spec: dict[str, Any], state_dim: int) -> Features:
     coordinate) to treat angles as points on the circle (see :class:`RBF`,
     :class:`LinearFeatures`, :meth:`RBF.grid`).
 
-    Unknown kinds or keys raise ValueError listing the valid ones.
+    Unknown kinds or keys, and values of the wrong type, raise ValueError.
     """
+    try:
+        return _make_features(spec, state_dim)
+    except TypeError as error:
+        raise ValueError(f"features spec {spec!r} has a value of the wrong type: {error}") from None
+
+
+def _make_features(spec: dict[str, Any], state_dim: int) -> Features:
     if not isinstance(spec, dict):
         raise ValueError(f"features spec must be a dict, got {type(spec).__name__}")
     kind = spec.get("kind")
