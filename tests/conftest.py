@@ -1,6 +1,64 @@
-"""Test-wide setup: headless GL chosen before mujoco or dm_control is imported."""
+"""Test-wide setup and shared helpers.
 
+Headless GL is chosen before mujoco or dm_control is imported. The helpers
+(tiny specs, the ``tatl`` command in a subprocess) are imported by test modules
+as ``from conftest import ...``.
+"""
+
+import dataclasses
+import json
 import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = {
+    "source_samples": 400,
+    "alignment_samples": 40,
+    "target_budgets": [40, 120],
+    "evaluation_episodes": 2,
+    "evaluation_steps": 40,
+}
+
+
+def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs):
+    """A shipped spec with the tiny preset and few FQI iterations; ``target_kwargs`` are set
+    past the validator (which would refuse bad ones), to fault a worker on purpose."""
+    from tatl_mj.experiments import spec as spec_mod
+
+    table = tomllib.loads((ROOT / "tasks" / f"{name}.toml").read_text())
+    table["presets"] = {"tiny": TINY}
+    table["source_learning"]["iterations"] = 5
+    for method in ("uma-tl", "rl"):
+        table["methods"][method]["iterations"] = 5
+    spec = spec_mod.parse_spec(table, f"{name}.toml")
+    if target_kwargs:
+        target = dataclasses.replace(spec.target, task_kwargs=target_kwargs)
+        spec = dataclasses.replace(spec, name=name + "_broken", target=target)
+    return spec
+
+
+def write_tiny(path: Path, name: str = "ip_to_flipped_ip") -> Path:
+    """A shipped spec written under ``path`` with a ``tiny`` preset instead of its own."""
+    text = (ROOT / "tasks" / f"{name}.toml").read_text().split("[presets.smoke]")[0]
+    text += "[presets.tiny]\n" + "\n".join(f"{k} = {json.dumps(v)}" for k, v in TINY.items()) + "\n"
+    out = path / f"{name}.toml"
+    out.write_text(text)
+    return out
+
+
+def tatl(*args: str, env: dict | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
+    """``tatl ARGS`` in a subprocess from the repository root, headless."""
+    return subprocess.run(
+        [sys.executable, "-m", "tatl_mj.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl", "PYTHONPATH": str(ROOT), **(env or {})},
+        cwd=ROOT,
+    )

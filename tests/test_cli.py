@@ -1,26 +1,10 @@
 """The `tatl` command end to end, as a user runs it (subprocesses, tiny budgets)."""
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def tatl(*args: str, env: dict | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "tatl_mj.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env={**os.environ, **(env or {})},
-        cwd=ROOT,
-    )
+from conftest import ROOT, tatl, write_tiny
 
 
 def test_list_prints_every_task():
@@ -42,7 +26,6 @@ def test_run_rejects_a_malformed_spec_with_file_and_key(tmp_path):
 
 
 def test_run_then_plot(tmp_path):
-    from test_runner import write_tiny
 
     spec = write_tiny(tmp_path)
     out = tmp_path / "out"
@@ -60,7 +43,6 @@ def test_run_then_plot(tmp_path):
 
 
 def test_run_with_a_plugin_method(tmp_path):
-    from test_runner import write_tiny
 
     spec = write_tiny(tmp_path)
     out = tmp_path / "out"

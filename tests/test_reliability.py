@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_runner import ROOT, tiny_spec, write_tiny
+from conftest import ROOT, tiny_spec, write_tiny
+from conftest import tatl as _tatl
 
 from tatl_mj import suite
 from tatl_mj.experiments import lock, records
@@ -24,9 +25,7 @@ linux_only = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="re
 
 
 def tatl(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "tatl_mj.cli", *args], env=ENV, capture_output=True, text=True, timeout=timeout
-    )
+    return _tatl(*args, timeout=timeout)
 
 
 def one_line_error(done: subprocess.CompletedProcess) -> str:

@@ -1,6 +1,5 @@
 """The batch runner: results shape, resume after a kill, failure isolation, Ray = local."""
 
-import dataclasses
 import json
 import os
 import signal
@@ -8,43 +7,13 @@ import subprocess
 import sys
 import time
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, TINY, tiny_spec, write_tiny
 
 from tatl_mj.experiments import records, runner
 from tatl_mj.experiments import spec as spec_mod
-
-ROOT = Path(__file__).resolve().parents[1]
-TINY = {
-    "source_samples": 400,
-    "alignment_samples": 40,
-    "target_budgets": [40, 120],
-    "evaluation_episodes": 2,
-    "evaluation_steps": 40,
-}
-
-
-def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs) -> spec_mod.ExperimentSpec:
-    table = tomllib.loads((ROOT / "tasks" / f"{name}.toml").read_text())
-    table["presets"] = {"tiny": TINY}
-    table["source_learning"]["iterations"] = 5
-    for method in ("uma-tl", "rl"):
-        table["methods"][method]["iterations"] = 5
-    spec = spec_mod.parse_spec(table, f"{name}.toml")
-    if target_kwargs:  # past the validator, which would refuse them: a fault inside a worker
-        target = dataclasses.replace(spec.target, task_kwargs=target_kwargs)
-        spec = dataclasses.replace(spec, name=name + "_broken", target=target)
-    return spec
-
-
-def write_tiny(path: Path, name: str = "ip_to_flipped_ip") -> Path:
-    text = (ROOT / "tasks" / f"{name}.toml").read_text().split("[presets.smoke]")[0]
-    text += "[presets.tiny]\n" + "\n".join(f"{k} = {json.dumps(v)}" for k, v in TINY.items()) + "\n"
-    out = path / f"{name}.toml"
-    out.write_text(text)
-    return out
 
 
 def test_local_run_writes_records_and_summary(tmp_path):
