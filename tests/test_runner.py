@@ -1,5 +1,6 @@
 """The batch runner: results shape, resume after a kill, failure isolation, Ray = local."""
 
+import dataclasses
 import json
 import os
 import signal
@@ -169,3 +170,13 @@ def test_timings_break_a_run_down_by_phase(tmp_path):
     assert {"source_learning", "target_sampling", "mapping", "rl learn", "rl evaluate"} <= set(table)
     assert all(seconds >= 0 for seconds in table.values()) and table["rl learn"] > 0
     assert "ip_to_flipped_ip:" in runner.format_timings({"ip_to_flipped_ip": table})
+
+
+def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
+    base = tiny_spec()
+    only_rl = dataclasses.replace(base, methods={"rl": base.methods["rl"]})
+    only_uma = dataclasses.replace(base, name="other", methods={"uma-tl": base.methods["uma-tl"]})
+    summary = runner.run([only_rl, only_uma], "tiny", [0], tmp_path, workers=1, progress=False)
+    assert list(summary["experiments"]["ip_to_flipped_ip"]["methods"]) == ["rl"]
+    assert list(summary["experiments"]["other"]["methods"]) == ["uma-tl"]
+    assert not summary["experiments"]["other"]["seed_sets_differ"]

@@ -253,13 +253,20 @@ def _json_samples(value: float) -> int | None:
     return None if math.isinf(value) else int(value)
 
 
+def _listed_anywhere(method: str, specs: list[dict]) -> bool:
+    return any(method in (spec.get("methods") or {}) for spec in specs)
+
+
 def build(
     run_dir: RunDirectory, *, specs: list[dict], preset: str, seeds: list[int], methods: list[str], **extra: Any
 ) -> dict:
     """The summary of a run folder: one entry per spec (see :func:`compare` for the fields used)."""
     experiments = {}
     for spec in specs:
-        experiments[spec["name"]] = {**_experiment(run_dir, spec["name"], seeds, methods), "spec": spec}
+        # Each experiment compares the methods its spec lists (and any the run added to all).
+        listed = list(spec.get("methods") or {})
+        own = [m for m in methods if m in listed or not _listed_anywhere(m, specs)]
+        experiments[spec["name"]] = {**_experiment(run_dir, spec["name"], seeds, own), "spec": spec}
     return {
         "experiments": experiments,
         "preset": preset,
