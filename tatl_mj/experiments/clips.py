@@ -25,10 +25,12 @@ RANDOM = "random"  # the uniformly random reference policy
 
 def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceArtifacts:
     if run_dir is not None:
-        blob = RunDirectory(run_dir).blob_path(spec.name, seed)
-        if blob.exists():
-            return pickle.loads(blob.read_bytes())
-        print(f"note: {blob} not found; training seed {seed} at preset {preset} instead")
+        folder = RunDirectory(run_dir)
+        blob = folder.blob_path(spec.name, seed)
+        # is_done validates the cache against its record (and moves a corrupt one aside).
+        if folder.is_done(spec.name, seed, "source"):
+            return pickle.loads(folder.read_blob(spec.name, seed))
+        print(f"note: no valid {blob}; training seed {seed} at preset {preset} instead")
     return pipeline.learn_source(spec, spec.preset(preset), seed)
 
 
