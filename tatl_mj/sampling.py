@@ -362,30 +362,10 @@ def collect(
     slot_episode = np.full(slots, -1, np.int64)
     chunks: list[tuple[np.ndarray, ...]] = []
     ended: list[int] = []
-    while True:
-        # Start an episode only when the live ones are not expected to supply
-        # the transitions still missing: starting all slots at once would cut
-        # long episodes (time-limited ones) short and throw most of them away.
-        # The schedule depends on episode lengths only, so it is deterministic;
-        # it fixes which live episode gets which random action (drawn per
-        # lockstep), so changing it changes the data, never its distribution.
-        # Lengths are estimated with the running episodes' ages as censored
-        # observations (_expected_remaining): 4% extra steps for 2x10^4 bicycle
-        # transitions, where the mean over ended episodes stepped 51%.
+    while True:  # one lockstep of every live episode per pass
         free = np.flatnonzero(slot_episode < 0)
         running = episodes.lengths[slot_episode[slot_episode >= 0]]
-        total = episodes.total()
-        expected, remaining = _expected_remaining(np.asarray(ended), running, limit)
-        supply = total + remaining.sum()
-        n_live, n_start = len(running), 0
-        for _ in free:
-            # A few episodes at least while transitions are missing, so that the
-            # threads have work at once; none once n are recorded (termination).
-            if total >= n or (supply >= n and n_live >= _MIN_LIVE):
-                break
-            supply += expected
-            n_live += 1
-            n_start += 1
+        n_start = _episodes_to_start(len(free), episodes.total(), n, np.asarray(ended), running, limit)
         if n_start:
             starts = free[:n_start]
             sim.start_episodes(batch, starts, env)
@@ -418,6 +398,32 @@ def collect(
         done = last | episodes.covered(ep)
         slot_episode[live[done]] = -1
     return _assemble(chunks, n)
+
+
+def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, running: np.ndarray, limit: int) -> int:
+    """How many new episodes ``collect`` starts now (at most ``n_free``).
+
+    Start an episode only when the live ones are not expected to supply the
+    transitions still missing: starting all slots at once would cut long
+    (time-limited) episodes short and throw most of them away. The schedule
+    depends on episode lengths only, so it is deterministic; it fixes which live
+    episode gets which random action (drawn per lockstep), so changing it changes
+    the data, never its distribution. Lengths are estimated with the running
+    episodes' ages as censored observations (:func:`_expected_remaining`): 4% extra
+    steps for 2x10^4 bicycle transitions, where the mean over ended episodes
+    stepped 51%. A few episodes run at least while transitions are missing, so
+    that the threads have work at once; none start once n are recorded.
+    """
+    expected, remaining = _expected_remaining(ended, running, limit)
+    supply = total + remaining.sum()
+    n_live, n_start = len(running), 0
+    for _ in range(n_free):
+        if total >= n or (supply >= n and n_live >= _MIN_LIVE):
+            break
+        supply += expected
+        n_live += 1
+        n_start += 1
+    return n_start
 
 
 def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
