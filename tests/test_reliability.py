@@ -427,3 +427,13 @@ def test_set_pendulum_moves_the_drawn_geometry_at_once():
     tip = physics.named.data.geom_xpos["tip"]
     assert np.linalg.norm(tip - hinge) == pytest.approx(1.6, abs=1e-9)
     assert np.array_equal(physics.data.qpos, qpos)
+
+
+def test_records_are_written_with_the_users_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        records.write_json(tmp_path / "a.json", {"x": 1})
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o644
+    assert not list(tmp_path.glob("*.tmp"))
