@@ -49,6 +49,12 @@ class TaskDescription:
         (-inf/inf where unlimited); a source simulator is queried inside it.
       control_timestep: seconds per control step (None where steps have no duration).
       known_model: the task's exact tabular model when it has one (else None).
+      transition_reward, transition_absorbing: the task's reward of a step
+        ``(states, action_indices, next_states) -> (N,)`` and its end condition
+        ``next_states -> (N,) bool``, for a task whose reward is not a function of
+        the next state alone (the grid world's bumps); a model standing in for the
+        task (Algorithm 2) is scored with them. None where the task's own
+        ``batch_reward`` serves.
     """
 
     domain: str
@@ -64,6 +70,8 @@ class TaskDescription:
     state_low: np.ndarray | None = None
     state_high: np.ndarray | None = None
     known_model: KnownModel | None = None
+    transition_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+    transition_absorbing: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         d = len(self.state_names)

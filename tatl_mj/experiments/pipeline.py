@@ -288,18 +288,35 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
     """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
 
     The target task's own reward and end conditions are applied to the model's
-    predicted states, from the same kind of start states as the target's episodes,
-    for the evaluation protocol's steps. A task without a vectorised reward of the
-    state (``batch_reward``) gets None: Algorithm 2 then cannot run there.
+    predicted states (``batch_reward``, or the description's ``transition_reward``
+    for a task whose reward depends on the step), from the same kind of start
+    states as the target's episodes, for the evaluation protocol's steps. For a
+    task that takes indices, predictions are snapped to the nearest of its states
+    (its known model's cells). A task with neither reward gets None: Algorithm 2
+    then cannot run there.
     """
     target = spec.target
+    description = describe(target)
     kwargs = {**target.task_kwargs, "random": derive_seed(seed, spec.name, "algorithm2-starts")}
     env = suite.load(target.domain, target.task, task_kwargs=kwargs)
     task = getattr(env, "task", None)
-    if not hasattr(task, "batch_reward"):
+    if description.transition_reward is not None and description.transition_absorbing is not None:
+        step_reward, absorbing = description.transition_reward, description.transition_absorbing
+    elif hasattr(task, "batch_reward"):
+        step_reward = lambda states, actions, next_states: task.batch_reward(next_states)  # noqa: E731
+        absorbing = task.batch_absorbing
+    else:
         return None
+    cells = description.known_model()[3].astype(np.float64) if description.known_model is not None else None
     starts = np.stack([env.reset().observation["state"] for _ in range(preset.evaluation_episodes)])
-    actions = describe(target).action_values
+    actions = description.action_values
+
+    def snap(states: np.ndarray) -> np.ndarray:
+        if not description.discrete:
+            return states
+        if cells is None:
+            return np.clip(np.rint(states), description.state_low, description.state_high)
+        return cells[np.argmin(np.linalg.norm(states[:, None] - cells[None], axis=2), axis=1)]
 
     def model_return(model: Any, policy: Callable) -> float:
         states, total = starts.copy(), np.zeros(len(starts))
@@ -307,11 +324,14 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
         with np.errstate(all="ignore"):
             for _ in range(preset.evaluation_steps):
                 action = policy(states)
-                states = model.predict(states, action if action.ndim == 2 else actions[action])
-                if not np.all(np.isfinite(states)):
+                values = action if action.ndim == 2 else actions[action]
+                next_states = model.predict(states, values)
+                if not np.all(np.isfinite(next_states)):
                     return float("nan")  # the model diverged
-                total += np.where(alive, task.batch_reward(states), 0.0)
-                alive &= ~np.asarray(task.batch_absorbing(states), dtype=bool)
+                next_states = snap(next_states)
+                total += np.where(alive, step_reward(states, action, next_states), 0.0)
+                alive &= ~np.asarray(absorbing(next_states), dtype=bool)
+                states = next_states
                 if not alive.any():
                     break
         return float(total.mean())

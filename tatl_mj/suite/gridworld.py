@@ -390,4 +390,20 @@ def describe(task: str, stochastic_wind: bool = False, **_: Any) -> TaskDescript
         state_low=np.zeros(2),
         state_high=np.array([N_ROWS - 1.0, N_COLS - 1.0]),
         known_model=None if stochastic_wind else functools.partial(transition_model, windy=windy),
+        transition_reward=transition_reward,
+        transition_absorbing=reached_goal,
     )
+
+
+def transition_reward(states: np.ndarray, actions: np.ndarray, next_states: np.ndarray) -> np.ndarray:
+    """(N,) rewards of steps ``states`` --``actions``--> ``next_states`` (cells, rounded):
+    -1 where the agent's own move is blocked, +10 where the step ends on the goal."""
+    cells = np.rint(np.asarray(states, dtype=np.float64)).astype(np.int64).reshape(-1, 2)
+    moved = cells + MOVES[np.asarray(actions, dtype=np.int64)]
+    blocked = np.array([not _free(int(r), int(c)) for r, c in moved], dtype=bool)
+    return np.where(blocked, BUMP_REWARD, 0.0) + np.where(reached_goal(next_states), GOAL_REWARD, 0.0)
+
+
+def reached_goal(states: np.ndarray) -> np.ndarray:
+    """(N,) whether each state (rounded to its cell) is the goal."""
+    return np.all(np.rint(np.asarray(states, dtype=np.float64)).reshape(-1, 2) == GOAL, axis=1)
