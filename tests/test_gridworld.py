@@ -197,9 +197,7 @@ def test_transition_reward_is_the_environments_reward_for_every_step():
         a = np.tile(np.arange(4), len(cells))
         s_next = cells[next_state.ravel()].astype(float)
         not_goal = ~description.transition_absorbing(s)  # the goal's own row is a formality
-        np.testing.assert_array_equal(
-            description.transition_reward(s, a, s_next)[not_goal], reward.ravel()[not_goal]
-        )
+        np.testing.assert_array_equal(description.transition_reward(s, a, s_next)[not_goal], reward.ravel()[not_goal])
         np.testing.assert_array_equal(description.transition_absorbing(s_next), absorbing.ravel())
 
 
@@ -207,7 +205,9 @@ def test_algorithm_2_runs_on_the_grid():
     import tomllib
 
     from conftest import ROOT
-    from tatl_mj.experiments import pipeline, spec as spec_mod
+
+    from tatl_mj.experiments import pipeline
+    from tatl_mj.experiments import spec as spec_mod
 
     table = tomllib.loads((ROOT / "tasks" / "grid_to_windy.toml").read_text())
     experiment = spec_mod.parse_spec(table, "grid_to_windy.toml")
