@@ -180,3 +180,23 @@ def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
     assert list(summary["experiments"]["ip_to_flipped_ip"]["methods"]) == ["rl"]
     assert list(summary["experiments"]["other"]["methods"]) == ["uma-tl"]
     assert not summary["experiments"]["other"]["seed_sets_differ"]
+
+
+@pytest.mark.parametrize("variant", ["mc_to_ip_triplets", "mc_to_ip_energy"])
+def test_learned_and_given_maps_are_recorded_with_their_coefficients(variant):
+    from tatl_mj.experiments import pipeline
+
+    table = tomllib.loads((ROOT / "tasks" / "variants" / f"{variant}.toml").read_text())
+    table["presets"] = {"tiny": {**TINY, "alignment_samples": 200}}
+    table["source_learning"]["iterations"] = 5
+    experiment = spec_mod.parse_spec(table, f"{variant}.toml")
+    artifacts = pipeline.learn_source(experiment, experiment.preset("tiny"), 0)
+    record = artifacts.mapping_record
+    assert np.shape(record["matrix"]) == (2, 2) and len(record["offset"]) == 2
+    json.dumps(record)  # it goes into source.json as it is
+    if variant == "mc_to_ip_energy":
+        # The hanging pendulum (theta = pi, at rest) is the car's valley, x = -pi/6, at rest.
+        np.testing.assert_allclose(
+            artifacts.mapping.chi_plus(np.array([[np.pi, 0.0]])), [[-np.pi / 6, 0.0]], atol=1e-12
+        )
+        np.testing.assert_allclose(artifacts.mapping.chi(np.array([[-np.pi / 6, 0.0]])), [[-np.pi, 0.0]], atol=1e-12)
