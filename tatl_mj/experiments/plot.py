@@ -229,28 +229,18 @@ def _mark_clipped(ax: Any, x: np.ndarray, y: np.ndarray, limits: tuple[float, fl
     """Triangles on the axis edge for values beyond it; returns how many."""
     low, high = limits
     below, above = y < low, y > high
-    ax.scatter(
-        x[below],
-        np.full(below.sum(), low),
-        marker="v",
-        s=28,
-        color=color,
-        edgecolor="black",
-        linewidth=0.5,
-        zorder=5,
-        clip_on=False,
-    )
-    ax.scatter(
-        x[above],
-        np.full(above.sum(), high),
-        marker="^",
-        s=28,
-        color=color,
-        edgecolor="black",
-        linewidth=0.5,
-        zorder=5,
-        clip_on=False,
-    )
+    for beyond, edge, marker in ((below, low, "v"), (above, high, "^")):
+        ax.scatter(
+            x[beyond],
+            np.full(beyond.sum(), edge),
+            marker=marker,
+            s=28,
+            color=color,
+            edgecolor="black",
+            linewidth=0.5,
+            zorder=5,
+            clip_on=False,
+        )
     return int(below.sum() + above.sum())
 
 
