@@ -8,6 +8,6 @@ bash scripts/setup.sh
 OUT=${OUT:-runs/quick}
 .venv/bin/tatl run tasks/*.toml --preset smoke --seeds 2 --out "$OUT"
 .venv/bin/tatl plot "$OUT"
-.venv/bin/tatl render tasks/cartpole_to_bicycle.toml --method ta-tl --seed 0 --run-dir "$OUT" \
-    --seconds 4 --out "$OUT/cartpole_to_bicycle_ta-tl.mp4"
-echo "done: $OUT/results.md, $OUT/figures/*.png, $OUT/cartpole_to_bicycle_ta-tl.mp4"
+.venv/bin/tatl render tasks/cartpole_to_bicycle.toml --method ta-tl-h --seed 0 --run-dir "$OUT" \
+    --seconds 4 --out "$OUT/cartpole_to_bicycle_ta-tl-h.mp4"
+echo "done: $OUT/results.md, $OUT/figures/*.png, $OUT/cartpole_to_bicycle_ta-tl-h.mp4"
