@@ -157,6 +157,10 @@ def test_methods_from_spec_builds_what_workers_run():
     preset = spec.preset("smoke")
     methods = spec_mod.methods_from_spec(spec, preset)
     assert list(methods) == list(spec.methods)
-    # Algorithm 2's increment defaults to the preset's smallest budget; the spec's settings reach the object.
-    assert methods["ta-tl"].batch == min(preset.target_budgets) and methods["ta-tl"].ridge == 1e-3
+    # The spec's settings reach the objects (the grid sets Algorithm 2's increment itself) ...
+    assert methods["ta-tl"].batch == 5000 and methods["ta-tl"].ridge == 1e-3
     assert methods["rl"].iterations == spec.methods["rl"]["iterations"]
+    # ... and where a spec leaves the increment unset, it is the preset's smallest budget.
+    pendulum = spec_mod.load_spec(TASKS[0].parent / "ip_to_flipped_ip.toml")
+    smoke = pendulum.preset("smoke")
+    assert spec_mod.methods_from_spec(pendulum, smoke)["ta-tl"].batch == min(smoke.target_budgets)
