@@ -10,6 +10,7 @@ largest target-sample budget, built by the same call as in evaluation
 from __future__ import annotations
 
 import pickle
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,12 @@ def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artif
         return pipeline.random_policy(spec.target, pipeline.derive_seed(seed, "random-policy"))
     chosen = spec.preset(preset)
     transfer = methods_from_spec(spec, chosen, [method])[method]
-    return pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+    with warnings.catch_warnings(record=True) as caught:  # e.g. Algorithm 2's rule not met: one line each
+        warnings.simplefilter("always")
+        policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+    for message in sorted({str(w.message) for w in caught}):
+        print(f"note: {message}")
+    return policy
 
 
 def render_from_spec(
