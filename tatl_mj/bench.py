@@ -1,7 +1,7 @@
 """``tatl bench``: how fast tatl-mj collects, learns and renders on this machine.
 
-One process, one measurement after another, for cart-pole, pendulum, mountain
-car and bicycle:
+One process, one measurement after another, for the first task of every domain
+with physics (cart-pole, pendulum, mountain car and bicycle today):
 
 - ``dm_control``: a Python loop over the environment's ``step`` with random
   actions (resetting at episode ends), the way a hand-written collector works,
@@ -34,8 +34,21 @@ from typing import Any
 
 import numpy as np
 
-DOMAINS = {"cartpole": "balance", "pendulum": "swingup", "mountain_car": "climb", "bicycle": "balance"}
-GYMNASIUM = {"cartpole": "CartPole-v1", "pendulum": "Pendulum-v1", "mountain_car": "MountainCar-v0"}
+
+def _physics_tasks() -> dict[str, str]:
+    """The first task of every domain with physics: what ``tatl bench`` times, by domain."""
+    from tatl_mj import suite
+
+    out: dict[str, str] = {}
+    for domain, task in suite.ALL_TASKS:
+        if domain not in out and not suite.describe(domain, task).discrete:
+            out[domain] = task
+    return out
+
+
+def _reference() -> tuple[str, str]:
+    """The task of the FQI, memory and render figures: the first physics task (cart-pole's)."""
+    return next(iter(_physics_tasks().items()))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,8 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object per line, the summary last")
     parser.add_argument(
         "--domains",
-        default=",".join(DOMAINS),
-        help=f"comma-separated subset of {', '.join(DOMAINS)} (default: all)",
+        default=None,
+        help="comma-separated subset of the suite's physics domains (default: all of them)",
     )
     parser.add_argument("--threads", type=int, default=2, help="MuJoCo threads for sampler and rollout (default 2)")
     parser.add_argument("--seconds", type=float, default=2.0, help="target length of each timing (default 2 s)")
@@ -64,12 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _check(args: argparse.Namespace) -> list[str]:
-    domains = [d for d in str(args.domains).split(",") if d]
-    unknown = sorted(set(domains) - set(DOMAINS))
+    physics = _physics_tasks()
+    domains = list(physics) if args.domains is None else [d for d in str(args.domains).split(",") if d]
+    unknown = sorted(set(domains) - set(physics))
     if not domains:
-        raise ValueError(f"--domains: none given; valid: {sorted(DOMAINS)}")
+        raise ValueError(f"--domains: none given; valid: {sorted(physics)}")
     if unknown:
-        raise ValueError(f"--domains: unknown {unknown}; valid: {sorted(DOMAINS)}")
+        raise ValueError(f"--domains: unknown {unknown}; valid: {sorted(physics)}")
     if args.threads < 1:
         raise ValueError(f"--threads must be >= 1, got {args.threads}")
     if not args.seconds > 0:
@@ -174,7 +188,7 @@ def time_rollout(domain: str, task: str, seconds: float, threads: int, seed: int
         mujoco.mj_getState(model, physics.data.ptr, row, spec)
     rng = np.random.default_rng(seed)
     actions = np.asarray(suite.action_set(domain), np.float64)
-    # Full control vectors (the bicycle adds rider and speed servo set-points).
+    # Full control vectors (a task may add set-points, e.g. rider noise and speed).
     controls = env.task.controls(actions, env.task.random)
     datas = [mujoco.MjData(model) for _ in range(max(threads, 1))]
     with mujoco.rollout.Rollout(nthread=threads) as pool:
@@ -243,9 +257,9 @@ def time_fqi(n: int, threads: int) -> dict[str, Any]:
         from tatl_mj.transfer import features, fqi
     except ImportError as error:
         return {"skipped": f"tatl_mj.transfer.fqi is not available: {error}"}
-    tr = sampling.collect("cartpole", "balance", n, seed=0, n_threads=threads)
+    tr = sampling.collect(*_reference(), n, seed=0, n_threads=threads)
     basis = features.RBF.grid(
-        low=[-2.4, -3.0, -0.21, -3.5],
+        low=[-2.4, -3.0, -0.21, -3.5],  # cart-pole's states under random actions
         high=[2.4, 3.0, 0.21, 3.5],
         n_centers=[3, 3, 5, 5],
         sigma=[1.2, 1.5, 0.05, 0.9],
@@ -260,13 +274,14 @@ def time_render(frames: int) -> dict[str, Any]:
     """640x480 frames per second from cart-pole's tracking camera."""
     from tatl_mj import suite
 
-    env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+    domain, task = _reference()
+    env = suite.load(domain, task, task_kwargs={"random": 0})
     env.reset()
     try:
         env.physics.render(480, 640, camera_id="tracking")  # context creation, not timed
         start = time.perf_counter()
         for _ in range(frames):
-            env.step(suite.action_set("cartpole")[1])
+            env.step(suite.action_set(domain)[1])
             env.physics.render(480, 640, camera_id="tracking")
         elapsed = time.perf_counter() - start
     except Exception as error:  # no GL here: report it, keep the other figures
@@ -284,7 +299,7 @@ def measure_memory(n: int, threads: int) -> dict[str, Any]:
 
     tracemalloc.start()
     start = time.perf_counter()
-    tr = sampling.collect("cartpole", "balance", n, seed=0, n_threads=threads, n_parallel=1024)
+    tr = sampling.collect(*_reference(), n, seed=0, n_threads=threads, n_parallel=1024)
     elapsed = time.perf_counter() - start
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -315,16 +330,20 @@ def run(args: argparse.Namespace) -> int:
             f"machine: {info['cpu']}, {info['cores']} cores ({info['usable_cores']} usable), "
             f"load {info['load_average_1min']}, mujoco {info['mujoco']}, threads {args.threads}"
         )
+    from tatl_mj import suite
+
+    physics = _physics_tasks()
     per_domain: dict[str, dict[str, float]] = {}
     for domain in domains:
-        task = DOMAINS[domain]
+        task = physics[domain]
         figures = {
             "dm_control": time_dm_control(domain, task, args.seconds / 2),
             "sampler": time_sampler(domain, task, args.seconds, args.threads),
             "rollout": time_rollout(domain, task, args.seconds / 2, args.threads),
         }
-        if domain in GYMNASIUM:
-            peer = time_gymnasium(GYMNASIUM[domain], args.seconds / 2)
+        peer_id = suite.describe(domain, task).gymnasium_peer
+        if peer_id is not None:
+            peer = time_gymnasium(peer_id, args.seconds / 2)
             if "skipped" in peer:
                 emit({"kind": "gymnasium", "domain": domain, **peer})
             else:
@@ -356,8 +375,8 @@ def run(args: argparse.Namespace) -> int:
         extra["render"] = time_render(args.render_frames)
         emit({"kind": "render", **extra["render"]})
     summary: dict[str, Any] = {"kind": "summary", "threads": args.threads, "machine": info}
-    if "cartpole" in per_domain:
-        summary.update(per_domain["cartpole"])
+    if _reference()[0] in per_domain:
+        summary.update(per_domain[_reference()[0]])
     summary["domains"] = per_domain
     summary["fqi_fit_s"] = extra.get("fqi", {}).get("seconds")
     summary["render_fps"] = extra.get("render", {}).get("fps")

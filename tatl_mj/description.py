@@ -55,6 +55,8 @@ class TaskDescription:
         the next state alone (the grid world's bumps); a model standing in for the
         task (Algorithm 2) is scored with them. None where the task's own
         ``batch_reward`` serves.
+      gymnasium_peer: the Gymnasium environment a user would otherwise pick for
+        this task (``tatl bench`` times its loop beside ours), or None.
     """
 
     domain: str
@@ -72,6 +74,7 @@ class TaskDescription:
     known_model: KnownModel | None = None
     transition_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
     transition_absorbing: Callable[[np.ndarray], np.ndarray] | None = None
+    gymnasium_peer: str | None = None
 
     def __post_init__(self) -> None:
         d = len(self.state_names)

@@ -173,4 +173,5 @@ def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskD
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-limit]),
         action_high=np.array([limit]),
+        gymnasium_peer="CartPole-v1" if task == next(iter(TASKS)) else None,
     )

@@ -348,6 +348,7 @@ def describe(task: str, **_: Any) -> TaskDescription:
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-1.0]),
         action_high=np.array([1.0]),
+        gymnasium_peer="MountainCar-v0" if task == next(iter(TASKS)) else None,
         state_low=np.array([SETTABLE_X[0], -np.inf]),
         state_high=np.array([SETTABLE_X[1], np.inf]),
     )

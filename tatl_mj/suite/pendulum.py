@@ -289,4 +289,5 @@ def describe(task: str, params: PendulumParams | None = None, **_: Any) -> TaskD
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-limit]),
         action_high=np.array([limit]),
+        gymnasium_peer="Pendulum-v1" if task == next(iter(TASKS)) else None,
     )
