@@ -180,6 +180,9 @@ def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
     assert list(summary["experiments"]["ip_to_flipped_ip"]["methods"]) == ["rl"]
     assert list(summary["experiments"]["other"]["methods"]) == ["uma-tl"]
     assert not summary["experiments"]["other"]["seed_sets_differ"]
+    from tatl_mj.experiments import plot
+
+    assert "Seed sets differ" not in plot.table(summary)  # neither is faulted for the other's methods
 
 
 @pytest.mark.parametrize("variant", ["mc_to_ip_triplets", "mc_to_ip_energy"])

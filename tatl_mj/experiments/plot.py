@@ -141,7 +141,10 @@ def table(summary: dict) -> str:
     ]
     for name, exp in summary["experiments"].items():
         order = sorted(exp["methods"], key=_order)
-        asked = [m for m in summary.get("methods", order) if m not in order]
+        # Methods the experiment's own spec lists but that finished no seed are flagged;
+        # other experiments' methods are not this one's business.
+        listed = list((exp.get("spec") or {}).get("methods") or summary.get("methods", order))
+        asked = [m for m in listed if m not in order]
         comparison = compare(exp, order + asked)
         lines += [f"### {exp['spec'].get('title', name)} (`{name}`)", ""]
         claim = exp["spec"].get("paper_claim")
