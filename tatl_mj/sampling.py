@@ -53,7 +53,7 @@ import numpy as np
 from dm_control.rl import control
 
 from tatl_mj import suite
-from tatl_mj.description import cell_rows
+from tatl_mj.description import CellMap
 from tatl_mj.transitions import Transitions
 
 IndexPolicy = Callable[[np.ndarray], np.ndarray]
@@ -551,7 +551,7 @@ def _step_from_env(sim: _Simulator, s: np.ndarray, a: np.ndarray) -> np.ndarray:
     known_model = suite.describe(sim.domain, sim.task_name, sim.kwargs).known_model
     if known_model is not None:
         next_index, _, _, cells = known_model()
-        return cells[next_index[cell_rows(cells, s), a]].astype(np.float64)
+        return cells[next_index[CellMap(cells).index(s), a]].astype(np.float64)
     env = sim.env
     target = getattr(env, "physics", env)  # whichever holds set_state_vector
     out = np.empty_like(s)

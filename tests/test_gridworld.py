@@ -222,10 +222,10 @@ def test_algorithm_2_runs_on_the_grid():
             self.moves = description.action_values
 
         def predict(self, states, values):
-            from tatl_mj.description import cell_rows
+            from tatl_mj.description import CellMap
 
             index = np.argmin(np.linalg.norm(values[:, None] - self.moves[None], axis=2), axis=1)
-            return self.cells[self.next_state[cell_rows(self.cells, states), index]].astype(float)
+            return self.cells[self.next_state[CellMap(self.cells).index(states), index]].astype(float)
 
     # The windy grid itself stands in for the target far better than the windless one. (Not
     # 0: U_M and U_Mhat start from different random cells, 20 episodes each.)

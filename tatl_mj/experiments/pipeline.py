@@ -26,7 +26,7 @@ from typing import Any, Callable
 import numpy as np
 
 from tatl_mj import sampling, suite
-from tatl_mj.description import TaskDescription
+from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
 from tatl_mj.transfer import alignment, coordinates, fqi, method
 from tatl_mj.transitions import Transitions
@@ -307,7 +307,7 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
         absorbing = task.batch_absorbing
     else:
         return None
-    cells = description.known_model()[3].astype(np.float64) if description.known_model is not None else None
+    cells = CellMap(description.known_model()[3]) if description.known_model is not None else None
     starts = np.stack([env.reset().observation["state"] for _ in range(preset.evaluation_episodes)])
     actions = description.action_values
 
@@ -316,7 +316,7 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
             return states
         if cells is None:
             return np.clip(np.rint(states), description.state_low, description.state_high)
-        return cells[np.argmin(np.linalg.norm(states[:, None] - cells[None], axis=2), axis=1)]
+        return cells.cells[cells.nearest(states)].astype(np.float64)
 
     def model_return(model: Any, policy: Callable) -> float:
         states, total = starts.copy(), np.zeros(len(starts))

@@ -54,7 +54,7 @@ import dataclasses
 
 import numpy as np
 
-from tatl_mj.description import TaskDescription
+from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction, TabularQ, q_iteration
@@ -67,59 +67,6 @@ PRIOR_SCOPES = ("agreeing-cells", "unvisited")
 
 
 # --- Cells and models -------------------------------------------------------------
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class CellMap:
-    """The cells of a discrete state space: state vector <-> cell index.
-
-    Attributes:
-      cells: (S, d) integer-valued state vectors; row i is cell i.
-    """
-
-    cells: np.ndarray
-
-    def __post_init__(self) -> None:
-        c = np.asarray(self.cells, dtype=np.float64)
-        if c.ndim != 2 or len(c) == 0 or not np.all(np.isfinite(c)) or np.any(c != np.rint(c)):
-            raise ValueError(f"CellMap.cells must be a non-empty (S, d) array of integers, got shape {c.shape}")
-        cells = c.astype(np.int64)
-        low = cells.min(axis=0)
-        shape = cells.max(axis=0) - low + 1
-        # A dense lookup over the cells' bounding box: state -> index in one fancy-index.
-        lookup = np.full(tuple(shape), -1, dtype=np.int64)
-        position = tuple((cells - low).T)
-        if np.any(lookup[position] != -1) or len(np.unique(cells, axis=0)) != len(cells):
-            raise ValueError("CellMap.cells must not repeat a cell")
-        lookup[position] = np.arange(len(cells))
-        object.__setattr__(self, "cells", cells)
-        object.__setattr__(self, "_low", low)
-        object.__setattr__(self, "_lookup", lookup)
-
-    @property
-    def n_cells(self) -> int:
-        return len(self.cells)
-
-    @property
-    def state_dim(self) -> int:
-        return self.cells.shape[1]
-
-    def index(self, states: np.ndarray) -> np.ndarray:
-        """(N, d) states -> (N,) int64 cell indices; ValueError names a state that is no cell."""
-        s = as_states(states, "states", self.state_dim)
-        rounded = np.rint(s).astype(np.int64)
-        offset = rounded - self._low
-        inside = np.all(rounded == s, axis=1) & np.all((offset >= 0) & (offset < self._lookup.shape), axis=1)
-        idx = np.full(len(s), -1, dtype=np.int64)
-        idx[inside] = self._lookup[tuple(offset[inside].T)]
-        if np.any(idx < 0):
-            raise ValueError(f"state {s[idx < 0][0].tolist()} is not one of the {self.n_cells} cells")
-        return idx
-
-    def nearest(self, points: np.ndarray) -> np.ndarray:
-        """(N, d) points -> (N,) index of the nearest cell (Euclidean; lowest index on ties)."""
-        p = as_states(points, "points", self.state_dim)
-        return np.argmin(np.sum((p[:, None, :] - self.cells[None, :, :]) ** 2, axis=2), axis=1).astype(np.int64)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
