@@ -74,7 +74,7 @@ def wait_for(condition, timeout: float, what: str) -> None:
         time.sleep(0.1)
 
 
-def start_run(tmp_path: Path, workers: int = 2) -> tuple[subprocess.Popen, Path]:
+def start_run(tmp_path: Path, workers: int = 2, *extra: str) -> tuple[subprocess.Popen, Path]:
     """``tatl run`` in the background; its stderr goes to tmp_path/stderr.txt.
 
     Not a pipe: an orphaned worker would hold a pipe open and hang the test
@@ -95,6 +95,7 @@ def start_run(tmp_path: Path, workers: int = 2) -> tuple[subprocess.Popen, Path]
         str(workers),
         "--out",
         str(out),
+        *extra,
     ]
     with open(tmp_path / "stderr.txt", "w") as stderr:
         return subprocess.Popen(cmd, env=ENV, stdout=subprocess.DEVNULL, stderr=stderr), out
@@ -110,6 +111,36 @@ def test_sigkill_of_the_main_process_leaves_no_worker_or_tracker(tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         wait_for(lambda: not [p for p in children if _stat(p)], 10, f"children {children} to end")
+    finally:
+        proc.kill()
+        proc.wait()
+        _kill_survivors(locals().get("children", set()))
+
+
+def _names(pids: set[int]) -> dict[int, str]:
+    out = {}
+    for pid in pids:
+        try:
+            out[pid] = Path(f"/proc/{pid}/comm").read_text().strip()
+        except OSError:
+            pass
+    return out
+
+
+@linux_only
+def test_sigkill_of_the_main_process_leaves_no_ray_process(tmp_path):
+    # Without the reaper, Ray 2.60's dashboard and runtime-env agents outlive the driver by 20-30 s.
+    pytest.importorskip("ray", reason="Ray is the optional extra tatl-mj[ray]")
+    proc, _ = start_run(tmp_path, 2, "--executor", "ray")
+    try:
+        wait_for(lambda: "raylet" in _names(descendants(proc.pid)).values(), 120, "the local Ray instance")
+        time.sleep(2)  # its agents and workers
+        children = descendants(proc.pid)
+        names = _names(children)
+        assert {"gcs_server", "raylet"} <= set(names.values()), names
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        wait_for(lambda: not [p for p in children if _stat(p)], 5, f"Ray processes {names} to end")
     finally:
         proc.kill()
         proc.wait()

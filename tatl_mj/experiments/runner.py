@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
-from tatl_mj.experiments import lock, pipeline
+from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
@@ -125,6 +125,8 @@ def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[U
             "--executor ray needs Ray: pip install 'tatl-mj[ray]' (or pip install 'ray>=2.9,<3')"
         ) from None
     started = not ray.is_initialized()
+    # [robustness] a local instance's agents would outlive a killed run by 20-30 s.
+    watcher = reaper.start() if started and not address else None
     if started:
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
         if address:
@@ -147,6 +149,9 @@ def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[U
     finally:
         if started:
             ray.shutdown()
+        if watcher is not None:
+            watcher.terminate()
+            watcher.wait()
 
 
 # --- the run ----------------------------------------------------------------------
