@@ -203,3 +203,17 @@ def test_learned_and_given_maps_are_recorded_with_their_coefficients(variant):
             artifacts.mapping.chi_plus(np.array([[np.pi, 0.0]])), [[-np.pi / 6, 0.0]], atol=1e-12
         )
         np.testing.assert_allclose(artifacts.mapping.chi(np.array([[-np.pi / 6, 0.0]])), [[-np.pi, 0.0]], atol=1e-12)
+
+
+def test_a_variant_runs_under_its_own_name_and_equals_its_built_in(tmp_path):
+    # [methods.copy] with method = "ta-tl" and ta-tl's own settings: the same curve, recorded as "copy".
+    base = tiny_spec()
+    methods = {"ta-tl": base.methods["ta-tl"], "copy": {**base.methods["ta-tl"], "method": "ta-tl"}}
+    spec = dataclasses.replace(base, methods=methods)
+    summary = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
+    assert list(summary["experiments"][spec.name]["methods"]) == ["ta-tl", "copy"]
+    folder = records.RunDirectory(tmp_path)
+    curves = [records.read_json(folder.record_path(spec.name, 0, name))["curve"] for name in ("ta-tl", "copy")]
+    assert [p["returns"] for p in curves[0]] == [p["returns"] for p in curves[1]]
+    with pytest.raises(ValueError, match="unknown method 'copyy' for ip_to_flipped_ip; valid methods: .*'copy'"):
+        runner.run([spec], "tiny", [0], tmp_path / "other", workers=1, progress=False, methods=["copyy"])

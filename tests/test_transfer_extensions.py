@@ -113,3 +113,30 @@ def test_replan_with_the_papers_protocol_spends_its_budget_on_policy_samples():
     assert calls == [100] and policy.samples_used == len(one_visit_per_pair())
     with pytest.raises(ValueError, match="policy_samples"):
         ReplanTATL(data="source-policy").learn(_grid_problem(), one_visit_per_pair())
+
+
+def test_a_variant_is_a_built_in_under_its_own_name():
+    variant = registry.build("ta-tl-h-no-cart", {"method": "ta-tl-h", "source_zero": ["x", "x_dot"], "horizon": 5})
+    assert isinstance(variant, HorizonTATL) and variant.name == "ta-tl-h-no-cart"
+    assert variant.source_zero == ("x", "x_dot") and variant.horizon == 5 and variant.reference == "source"
+    upright = registry.build("upright-short", {"method": "apprentice-upright", "horizon": 3})
+    assert upright.reference == "zero" and upright.name == "upright-short"
+    with pytest.raises(ValueError, match="method 'ta-tl' is a built-in; a variant of 'ta-tl-h' needs a name"):
+        registry.build("ta-tl", {"method": "ta-tl-h"})
+    with pytest.raises(ValueError, match=r"unknown method 'ta-tl-hh'; valid methods: .* \(or a variant"):
+        registry.build("mine", {"method": "ta-tl-hh"})
+    with pytest.raises(ValueError, match="unknown method 'mine'; valid methods"):
+        registry.build("mine", {})
+    with pytest.raises(ValueError, match="'method' of method 'mine' must name a built-in method"):
+        registry.build("mine", {"method": 3})
+
+
+def test_source_zero_names_source_coordinates():
+    cartpole, bicycle = suite.describe("cartpole", "balance"), suite.describe("bicycle", "balance")
+    HorizonTATL(source_zero=("x", "x_dot")).check(cartpole, bicycle)
+    with pytest.raises(ValueError, match=r"source_zero names 'cart'; valid choices: \['x', 'x_dot', 'theta'"):
+        HorizonTATL(source_zero=("cart",)).check(cartpole, bicycle)
+    with pytest.raises(ValueError, match="source_zero needs reference = 'source'"):
+        HorizonTATL(source_zero=("x",), reference="zero")
+    with pytest.raises(ValueError, match="source_zero must be source state names"):
+        HorizonTATL(source_zero=(0,))

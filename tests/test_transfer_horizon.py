@@ -321,3 +321,30 @@ def test_linearised_recovers_a_linear_model_and_cancels_fixed_seed_noise():
     a = np.array([[0.5], [-1.0]])
     offset = np.random.default_rng(0).normal(size=(1, 2)) * 1e-3  # the first row's draw, constant
     np.testing.assert_allclose(model(s, a), s @ A.T + a @ B.T + offset, atol=1e-9)
+
+
+def test_source_zero_starts_the_source_rollout_at_zero_on_those_coordinates():
+    """source_zero = (0,) on the goal fixture: the rollout starts at x_0 = 0 whatever the
+    target's position: u = +1, +1, 0 from 0 (0, 0.7, 1.05, 1.025), the same for both rows,
+    and the references equal the plain policy's asked from a target state at position 0."""
+    policy = _goal_policy(integrator_step, horizon=6, step_ratio=2.0, source_zero=(0,))
+    states = np.array([[-3.0, 0.5], [2.0, -1.0]])
+    got = policy.step(states)
+    x = [0.0, 0.5 + DT_S, 0.35 + 0.5 + DT_S, 0.525 + 0.5]
+    np.testing.assert_allclose(got.source_states[:, :, 0], [x, x], rtol=1e-14)
+    plain = _goal_policy(integrator_step, horizon=6, step_ratio=2.0).step(np.array([[0.0, 0.5], [0.0, -1.0]]))
+    np.testing.assert_allclose(got.references, plain.references, rtol=1e-14)
+    # The target state itself still drives the free response: the actions differ from plain's.
+    assert not np.allclose(got.action, plain.action)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(source_zero=(-1,)), "source_zero must be"),
+        (dict(source_zero=(0,), reference="zero"), "source_zero must be"),
+    ],
+)
+def test_source_zero_is_checked(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        _goal_policy(integrator_step, **kwargs)

@@ -203,8 +203,11 @@ def _plan(
     for spec in specs:
         names = list(spec.methods) if methods is None else list(methods)
         for name in names:
-            if name not in custom and name not in registry.METHODS:
-                raise ValueError(f"unknown method {name!r}; valid methods: {sorted(registry.METHODS)}")
+            if name not in custom and name not in registry.METHODS and name not in spec.methods:
+                raise ValueError(
+                    f"unknown method {name!r} for {spec.name}; valid methods: "
+                    f"{sorted(set(registry.METHODS) | set(spec.methods))}"
+                )
         units += [Unit(spec.name, seed, name) for seed in seeds for name in [SOURCE_UNIT, *names]]
     return units, custom
 

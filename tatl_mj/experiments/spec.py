@@ -359,7 +359,7 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     out = {}
     for name in chosen:
         settings = dict(spec.methods.get(name, {}))
-        if "batch" in registry.settings_of(name) and settings.get("batch") is None:
+        if "batch" in registry.settings_of(registry.base_of(name, settings)) and settings.get("batch") is None:
             settings["batch"] = min(preset.target_budgets)
         out[name] = registry.build(name, settings)
     return out

@@ -18,6 +18,10 @@ idea is applied over a horizon of H target steps with one action held throughout
    between the chord; a non-integer rho needs no special case.
    With ``reference="zero"`` the references are all 0 (the ``apprentice-upright``
    ablation: the same controller aiming at the target's zero state, no source at all).
+   ``source_zero`` names source coordinates set to 0 in ``x_0`` before the rollout
+   (an ablation that shows which part of the source's state makes the reference
+   worse than upright: e.g. the cart's position and velocity, which the cart-pole
+   policy also steers back to centre).
 3. Nominal action ``a_0``: the target action of the first greedy source action's
    index, ``target_actions[a_S]`` (Assumption 1, as Algorithm 1's a_T), or
    ``clip(0, low, high)`` for the zero reference.
@@ -127,6 +131,8 @@ class HorizonTATLPolicy:
         (n, mT) target action values of the source's n action indices; required for
         ``reference="source"``.
       periodic: (dT,) bools marking angle coordinates (``apprentice.periodic``).
+      source_zero: indices of source coordinates set to 0 in x_0 = chi_plus(s_T) before
+        the source rollout (empty: none).
       delta: (mT,) finite-difference probe in actuator units (> 0); None means 10% of
         the actuator range (1 where the range is unbounded). The probe goes towards the
         inside of the range, so a clipping simulator sees the perturbation.
@@ -145,6 +151,7 @@ class HorizonTATLPolicy:
     source_step: SourceStep | None = None
     target_actions: np.ndarray | None = None
     periodic: tuple[bool, ...] | None = None
+    source_zero: tuple[int, ...] = ()
     delta: np.ndarray | None = None
     samples_used: int | None = None
 
@@ -203,6 +210,15 @@ class HorizonTATLPolicy:
                     f"source_q has {self.source_q.n_actions} actions, target_actions has {len(actions)} (Assumption 1)"
                 )
             object.__setattr__(self, "target_actions", actions)
+        zero = tuple(self.source_zero)
+        if zero and (
+            self.reference != "source"
+            or not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0 for i in zero)
+        ):
+            raise ValueError(
+                f"source_zero must be source coordinate indices >= 0 with reference='source', got {zero!r}"
+            )
+        object.__setattr__(self, "source_zero", tuple(int(i) for i in zero))
         object.__setattr__(self, "periodic", periodic_mask(self.periodic, None, "periodic"))
         if self.delta is None:
             span = high - low
@@ -222,6 +238,11 @@ class HorizonTATLPolicy:
     def _source_references(self, s_T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """x_0, a_S, the source rollout (N, K + 1, dS) and the references (N, H, dT)."""
         x = self.mapping.chi_plus(s_T)
+        if self.source_zero:
+            if max(self.source_zero) >= x.shape[1]:
+                raise ValueError(f"source_zero {self.source_zero} out of range for {x.shape[1]} source coordinates")
+            x = x.copy()
+            x[:, list(self.source_zero)] = 0.0
         s_hat_S = x
         rollout = [x]
         a_S = None
@@ -341,6 +362,9 @@ class HorizonTATL(TATL):
     - ``reference``: ``"source"``, or ``"zero"`` for ``apprentice-upright``: the same
       controller aiming at the target's zero state, no source at all (its apprentice
       then fits every sample: Algorithm 2 is defined through the source policy);
+    - ``source_zero``: names of source state coordinates set to 0 where the source
+      rollout starts (an ablation: which part of the source's state hurts the
+      reference); empty: none;
     - ``model``: ``"apprentice"``, or ``"oracle"``: the real target simulator's exact
       linearisation at the target's zero state (:func:`linearised`) stands in for the
       apprentice, an ablation that separates the apprentice's estimation error from
@@ -353,6 +377,7 @@ class HorizonTATL(TATL):
     step_ratio: float | None = None
     weights: tuple[float, ...] = ()
     reference: str = "source"
+    source_zero: tuple[str, ...] = ()
     model: str = "apprentice"
     name: str = "ta-tl-h"
 
@@ -380,6 +405,10 @@ class HorizonTATL(TATL):
             raise ValueError(f"{owner}.reference is {self.reference!r}; valid choices: {list(REFERENCES)}")
         if self.model not in self.MODELS:
             raise ValueError(f"{owner}.model is {self.model!r}; valid choices: {list(self.MODELS)}")
+        if not isinstance(self.source_zero, tuple) or not all(isinstance(n, str) for n in self.source_zero):
+            raise ValueError(f"{owner}.source_zero must be source state names, got {self.source_zero!r}")
+        if self.source_zero and self.reference != "source":
+            raise ValueError(f"{owner}.source_zero needs reference = 'source' (the zero reference has no source)")
 
     @property
     def uses_samples(self) -> bool:
@@ -394,6 +423,12 @@ class HorizonTATL(TATL):
             raise ValueError(
                 f"{owner}.weights must have {target.state_dim} entries ({', '.join(target.state_names)}), "
                 f"got {len(self.weights)}"
+            )
+        unknown = [n for n in self.source_zero if n not in source.state_names]
+        if unknown:
+            raise ValueError(
+                f"{owner}.source_zero names {unknown[0]!r}; valid choices: {list(source.state_names)} "
+                f"({source.domain}/{source.task}'s state)"
             )
         if self.step_ratio is None and (source.control_timestep is None or target.control_timestep is None):
             raise ValueError(f"{owner}.step_ratio is needed: the tasks' control steps have no duration")
@@ -418,6 +453,7 @@ class HorizonTATL(TATL):
                 mapping=problem.mapping,
                 source_step=problem.source_step,
                 target_actions=target.action_values,
+                source_zero=tuple(problem.source.state_names.index(n) for n in self.source_zero),
             )
             if self.reference == "source"
             else {}

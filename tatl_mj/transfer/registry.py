@@ -41,6 +41,22 @@ BASELINES = ("uma-tl", "rl")
 """The paper's comparison methods (reports compare every other method with them)."""
 
 
+VARIANT_KEY = "method"
+"""A spec's ``[methods.NAME]`` table may name a built-in here (``method = "ta-tl-h"``):
+NAME is then a variant of it with these settings, reported under NAME (an ablation
+such as ``ta-tl-h-no-cart``). Without it, NAME is the built-in itself."""
+
+
+def base_of(name: str, settings: dict[str, Any] | None = None) -> str:
+    """The built-in a method table builds: its ``method`` key, else its own name."""
+    base = (settings or {}).get(VARIANT_KEY, name)
+    if not isinstance(base, str):
+        raise ValueError(f"{VARIANT_KEY!r} of method {name!r} must name a built-in method, got {base!r}")
+    if base != name and name in METHODS:
+        raise ValueError(f"method {name!r} is a built-in; a variant of {base!r} needs a name of its own")
+    return base
+
+
 def settings_of(name: str) -> tuple[str, ...]:
     """The setting names a built-in method accepts (its constructor's fields, bar those fixed by the name)."""
     factory = _factory(name)
@@ -51,7 +67,10 @@ def settings_of(name: str) -> tuple[str, ...]:
 
 def _factory(name: str) -> Callable[..., TransferMethod]:
     if name not in METHODS:
-        raise ValueError(f"unknown method {name!r}; valid methods: {sorted(METHODS)}")
+        raise ValueError(
+            f"unknown method {name!r}; valid methods: {sorted(METHODS)} "
+            f"(or a variant: a table with {VARIANT_KEY} = one of them)"
+        )
     return METHODS[name]
 
 
@@ -63,14 +82,18 @@ def _plain(value: Any) -> Any:
 
 
 def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
-    """The built-in method ``name`` with ``settings``; ValueError naming an unknown or bad setting."""
-    factory = _factory(name)
-    settings = dict(settings or {})
-    valid = settings_of(name)
+    """The built-in method ``name`` (or the variant ``name`` of ``settings["method"]``) with
+    ``settings``; ValueError naming an unknown or bad setting."""
+    base = base_of(name, settings)
+    factory = _factory(base)
+    settings = {k: v for k, v in (settings or {}).items() if k != VARIANT_KEY}
+    valid = settings_of(base)
     unknown = sorted(set(settings) - set(valid))
     if unknown:
-        raise ValueError(f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: {sorted(valid)}")
+        raise ValueError(
+            f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: {sorted([*valid, VARIANT_KEY])}"
+        )
     return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
 
 
-__all__ = ["BASELINES", "METHODS", "SOURCE_FREE", "build", "settings_of"]
+__all__ = ["BASELINES", "METHODS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "build", "settings_of"]
