@@ -132,3 +132,17 @@ def test_figure_is_drawn_for_any_number_of_methods(tmp_path, case):
         rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
         assert (np.abs(image.astype(int) - rgb).sum(axis=2) < 10).sum() > 20, colour
     assert math.isfinite(image.mean())
+
+
+def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
+    result = summary({"ta-tl-replan": [100, 100, 1000], "replan-no-source": [10000, 10000, 10000]})
+    result["experiments"]["toy"]["spec"]["methods"] = {"ta-tl-replan": {}, "replan-no-source": {}}
+    table = plot.table(result)
+    assert "Transfer against its ablation without the source:" in table
+    assert (
+        "- `ta-tl-replan` vs `replan-no-source`: mean final return 10 vs 10 (higher on 0, lower on 0 of 3 seeds); "
+        "median target samples to threshold 100 vs 10,000 (fewer on 3, more on 0 of 3 seeds): "
+        "`ta-tl-replan` **beats** its source-free ablation"
+    ) in table
+    del result["experiments"]["toy"]["spec"]["methods"]
+    assert "ablation without the source" not in plot.table(result)

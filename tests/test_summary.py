@@ -78,3 +78,40 @@ def test_compare_without_meaningful_threshold_reports_no_samples():
     c = summary.compare(exp)
     assert not c.meaningful and c.best_method == "a"
     assert all(r.samples_to_threshold == () for r in c.methods)
+
+
+SEEDS3 = {0: 0.0, 1: 0.0, 2: 0.0}
+
+
+@pytest.mark.parametrize(
+    "mine, verdict",
+    [
+        # same final returns (10), but mine reaches the threshold (9.5) at 100 on every seed, the ablation at 1000
+        ({0: [10, 10], 1: [10, 10], 2: [10, 10]}, "**beats**"),
+        # both at the cap from 100 samples: a tie
+        ({0: [0, 10], 1: [0, 10], 2: [0, 10]}, "**does not beat** its source-free ablation (no clear difference)"),
+        # lower final return on every seed, never reaching the threshold
+        ({0: [0, 2], 1: [0, 3], 2: [0, 4]}, "it is **worse**"),
+    ],
+)
+def test_ablation_verdict_reads_returns_and_samples_seed_by_seed(mine, verdict):
+    ablation = {0: [0, 10], 1: [0, 10], 2: [0, 10]}
+    c = summary.compare(experiment({"ta-tl-h": mine, "apprentice-upright": ablation}, SEEDS3))
+    text = summary.ablation_verdict(c, "ta-tl-h", "apprentice-upright")
+    assert text.startswith("`ta-tl-h` vs `apprentice-upright`: mean final return") and verdict in text, text
+    assert summary.ablation_verdict(c, "ta-tl-h", "replan-no-source") is None
+
+
+def test_ablation_pairs_follow_built_ins_and_variants():
+    methods = {
+        "ta-tl": {},
+        "ta-tl-h": {"horizon": 20},
+        "ta-tl-h-no-cart": {"method": "ta-tl-h", "source_zero": ["x"]},
+        "apprentice-upright": {},
+        "rl": {},
+    }
+    assert summary.ablation_pairs(methods) == [
+        ("ta-tl-h", "apprentice-upright"),
+        ("ta-tl-h-no-cart", "apprentice-upright"),
+    ]
+    assert summary.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say

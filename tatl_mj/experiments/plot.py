@@ -29,7 +29,14 @@ from typing import Any
 import numpy as np
 
 from tatl_mj.experiments.records import read_json
-from tatl_mj.experiments.summary import THRESHOLD_FRACTION, Comparison, MethodResult, compare
+from tatl_mj.experiments.summary import (
+    THRESHOLD_FRACTION,
+    Comparison,
+    MethodResult,
+    ablation_pairs,
+    ablation_verdict,
+    compare,
+)
 
 COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
 LABELS = {"ta-tl": "TA-TL", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
@@ -177,6 +184,10 @@ def table(summary: dict) -> str:
             else:
                 samples, ratio = "no meaningful threshold", "n/a"
             lines.append(f"| {method_label(r.method)} | {final} | {samples} | {ratio} |")
+        verdicts = [ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})]
+        if any(verdicts):
+            lines += ["", "Transfer against its ablation without the source:", ""]
+            lines += [f"- {v}" for v in verdicts if v]
         threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
         mapping = sorted(set(exp.get("mapping_target_samples", [])))
         lines += [

@@ -173,6 +173,79 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
     )
 
 
+def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
+    """(transfer method, its source-free ablation) for every such pair a spec lists.
+
+    Pairs go by built-in (``registry.ABLATION_OF``), so a variant (a table with
+    ``method = "ta-tl-h"``) is paired with the ablation of its built-in.
+    """
+    from tatl_mj.transfer import registry
+
+    def base(name: str) -> str | None:
+        try:
+            return registry.base_of(name, spec_methods.get(name) or {})
+        except ValueError:
+            return None
+
+    bases = {name: base(name) for name in spec_methods}
+    return [
+        (name, other)
+        for name, b in bases.items()
+        if b in registry.ABLATION_OF
+        for other, ob in bases.items()
+        if ob == registry.ABLATION_OF[b]
+    ]
+
+
+def _side(mine: np.ndarray, theirs: np.ndarray, mine_centre: float, theirs_centre: float) -> tuple[int, int, int]:
+    """(+1 better / -1 worse / 0 neither, seeds better, seeds worse) where larger is better."""
+    better, worse = int(np.sum(mine > theirs)), int(np.sum(mine < theirs))
+    if mine_centre > theirs_centre and better > len(mine) / 2:
+        return 1, better, worse
+    if mine_centre < theirs_centre and worse > len(mine) / 2:
+        return -1, better, worse
+    return 0, better, worse
+
+
+def ablation_verdict(comparison: Comparison, method: str, ablation: str) -> str | None:
+    """One plain sentence: does ``method`` beat its source-free ``ablation``?
+
+    Seed by seed on the compared seeds, on final return (mean) and, where the
+    threshold is meaningful, on target samples to threshold (median; fewer is
+    better): a side counts when the aggregate and more than half the seeds agree.
+    It beats the ablation when one side is better and neither is worse.
+    """
+    mine, theirs = comparison.result(method), comparison.result(ablation)
+    if mine is None or theirs is None:
+        return None
+    a, b = np.asarray(mine.final_returns), np.asarray(theirs.final_returns)
+    n = len(a)
+    ret, higher, lower = _side(a, b, a.mean(), b.mean())
+    parts = [f"mean final return {a.mean():.4g} vs {b.mean():.4g} (higher on {higher}, lower on {lower} of {n} seeds)"]
+    sides = [ret]
+    if comparison.meaningful:
+        sa, sb = np.asarray(mine.samples_to_threshold), np.asarray(theirs.samples_to_threshold)
+        samp, fewer, more = _side(-sa, -sb, -mine.median_samples, -theirs.median_samples)
+        sides.append(samp)
+        parts.append(
+            f"median target samples to threshold {_samples_text(mine.median_samples)} vs "
+            f"{_samples_text(theirs.median_samples)} (fewer on {fewer}, more on {more} of {n} seeds)"
+        )
+    if max(sides) == 1 and min(sides) >= 0:
+        verdict = "**beats** its source-free ablation: this gain is credited to transfer"
+    elif min(sides) == -1 and max(sides) <= 0:
+        verdict = "**does not beat** its source-free ablation: it is **worse**, the source hurts here"
+    elif min(sides) == -1:
+        verdict = "**does not clearly beat** its source-free ablation: better on one measure, worse on the other"
+    else:
+        verdict = "**does not beat** its source-free ablation (no clear difference): no gain is credited to transfer"
+    return f"`{method}` vs `{ablation}`: {'; '.join(parts)}: `{method}` {verdict}."
+
+
+def _samples_text(value: float) -> str:
+    return "never" if not math.isfinite(value) else f"{value:,.0f}"
+
+
 def _random_by_seed(experiment: dict) -> dict[int, float] | None:
     if "random_returns" in experiment:
         return dict(zip(experiment["source_seeds"], experiment["random_returns"]))

@@ -37,6 +37,14 @@ METHODS: dict[str, Callable[..., TransferMethod]] = {
 SOURCE_FREE = ("rl", "apprentice-upright", "replan-no-source")
 """Methods that never look at the source: the ablations a transfer win is measured against."""
 
+ABLATION_OF: dict[str, str] = {
+    "ta-tl-h": "apprentice-upright",
+    "ta-tl-replan": "replan-no-source",
+    "ta-tl-replan-protocol": "replan-no-source",
+}
+"""Extension -> the built-in that is the same method without the source: the one a
+win must beat to be credited to transfer (reports state, per experiment, whether it does)."""
+
 BASELINES = ("uma-tl", "rl")
 """The paper's comparison methods (reports compare every other method with them)."""
 
@@ -96,4 +104,4 @@ def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
     return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
 
 
-__all__ = ["BASELINES", "METHODS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "build", "settings_of"]
+__all__ = ["ABLATION_OF", "BASELINES", "METHODS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "build", "settings_of"]
