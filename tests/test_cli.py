@@ -39,7 +39,7 @@ def test_run_then_plot(tmp_path):
     figure = iio.imread(out / "figures" / "ip_to_flipped_ip.png")
     assert figure.shape[0] > 200 and figure.std() > 10  # a drawn figure, not a blank page
     table = (out / "results.md").read_text()
-    assert "| TA-TL |" in table and "| UMA-TL |" in table and "| RL (no transfer) |" in table
+    assert "| TA-TL (paper, Alg. 1) |" in table and "| UMA-TL |" in table and "| RL (no transfer) |" in table
 
 
 def test_run_with_a_plugin_method(tmp_path):

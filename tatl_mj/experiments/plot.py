@@ -39,7 +39,7 @@ from tatl_mj.experiments.summary import (
 )
 
 COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
-LABELS = {"ta-tl": "TA-TL", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
+LABELS = {"ta-tl": "TA-TL (paper, Alg. 1)", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
 # Colours for other methods, picked by a hash of the name (stable across runs);
 # none is close to the fixed ones or to the grey/black reference lines.
 PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173", "#e7ba52", "#008080")
