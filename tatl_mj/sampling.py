@@ -100,6 +100,9 @@ class _Simulator:
         self.blank_row = np.empty(mujoco.mj_stateSize(self.model, _INTEGRATION))
         mujoco.mj_getState(self.model, data, self.blank_row, _INTEGRATION)
         self._batch: mujoco.batch.Batch | None = None
+        # Live views of batches' state fields (Batch.bind builds one per call, ~15 us,
+        # five a step: as much as a small batch's physics). Holding the batch keeps its id.
+        self._views: dict[int, tuple[mujoco.batch.Batch, dict[str, np.ndarray]]] = {}
         # dm_control's legacy step (every integrator but RK4) starts a step with
         # mj_step2 on the stages of the last forward pass; after a reset that is
         # Physics.after_reset's (by default run with actuation disabled, which
@@ -140,14 +143,26 @@ class _Simulator:
         # dm_control's own float expression, so that the count matches exactly.
         return time_limit / (self.physics.timestep() * self.n_sub)
 
+    def bound(self, batch: mujoco.batch.Batch, name: str) -> np.ndarray:
+        """``batch.bind(name)`` for the state fields qpos, qvel and ctrl, made once per batch."""
+        entry = self._views.get(id(batch))
+        if entry is None or entry[0] is not batch:
+            if len(self._views) >= 8:  # collect() and evaluate() make a batch per call
+                self._views.clear()
+            entry = self._views[id(batch)] = (batch, {})
+        views = entry[1]
+        if name not in views:
+            views[name] = batch.bind(name)
+        return views[name]
+
     def place(self, batch: mujoco.batch.Batch, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Puts simulations ``ids`` at a fresh reset's state with these qpos and qvel.
 
         ctrl is left as reset leaves it: ``advance`` writes it before every step.
         """
         batch.state[ids] = self.blank_row
-        batch.bind("qpos")[ids] = qpos
-        batch.bind("qvel")[ids] = qvel
+        self.bound(batch, "qpos")[ids] = qpos
+        self.bound(batch, "qvel")[ids] = qvel
 
     def start_episodes(self, batch: mujoco.batch.Batch, ids: np.ndarray, env: Any) -> None:
         """Puts simulations ``ids`` at the starts of ``env``'s next ``len(ids)`` episodes.
@@ -169,7 +184,7 @@ class _Simulator:
         ``first`` marks the simulations whose episode (or query) starts with
         this step, right after a reset.
         """
-        batch.bind("ctrl")[ids] = controls
+        self.bound(batch, "ctrl")[ids] = controls
         warnings = batch.warning[:, :, _WARNING_NUMBER]
         before = warnings[ids].copy()
         diverged = np.zeros(len(ids), bool)
@@ -185,7 +200,7 @@ class _Simulator:
             batch.step(ids, nstep=self.n_sub)
         # Any new MuJoCo warning is a PhysicsError in dm_control.
         diverged |= (warnings[ids] != before).any(axis=1)
-        states = self.physics.states_from(batch.bind("qpos")[ids], batch.bind("qvel")[ids])
+        states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
     def _first_substep(self, row: np.ndarray) -> bool:

@@ -348,3 +348,40 @@ def test_source_zero_starts_the_source_rollout_at_zero_on_those_coordinates():
 def test_source_zero_is_checked(kwargs, match):
     with pytest.raises(ValueError, match=match):
         _goal_policy(integrator_step, **kwargs)
+
+
+def test_closed_form_responses_equal_the_model_rollouts():
+    """An affine model given as (A, B, c): every intermediate of a decision equals the
+    finite-difference path's (H model calls per decision) to rounding, for several
+    horizons and ratios, with clipping in play, on the source and the zero reference."""
+    rng = np.random.default_rng(11)
+    a = np.array([[1.0, 0.12], [-0.3, 0.97]])
+    b, c = np.array([[0.01], [0.2]]), np.array([0.05, -0.02])
+
+    def model(s, u):
+        return s @ a.T + u @ b.T + c
+
+    states = rng.uniform(-2, 2, size=(25, 2))
+    clipped = 0
+    for horizon, ratio in [(1, 1.0), (7, 2.0), (20, 2.0), (9, 0.5)]:
+        for reference in ("source", "zero"):
+            kwargs = dict(horizon=horizon, step_ratio=ratio, weights=np.array([1.0, 0.1]), reference=reference)
+            rolled = _goal_policy(model, **kwargs).step(states)
+            closed = _goal_policy(model, affine=(a, b, c), **kwargs).step(states)
+            for field in ("free", "control", "adaptive", "action"):
+                np.testing.assert_allclose(
+                    getattr(closed, field), getattr(rolled, field), rtol=1e-9, atol=1e-10, err_msg=field
+                )
+            clipped += int(np.sum(np.abs(closed.action) == 5.0))
+    assert clipped > 0  # some actions hit the +-5 limit
+
+
+def test_apprentice_affine_parts_predict_exactly():
+    apprentice = _integrator_apprentice()
+    a, b, c = apprentice.affine()
+    s, u = np.random.default_rng(2).normal(size=(10, 2)), np.random.default_rng(3).normal(size=(10, 1))
+    np.testing.assert_allclose(s @ a.T + u @ b.T + c, apprentice.predict(s, u), rtol=1e-12, atol=1e-12)
+    periodic = fit_apprentice(s, u, integrator_step(s, u), LinearFeatures(), periodic=(True, False))
+    assert periodic.affine() is None  # an angle wraps: no closed form
+    with pytest.raises(ValueError, match="affine must be finite"):
+        _goal_policy(integrator_step, affine=(a, b[:1], c))

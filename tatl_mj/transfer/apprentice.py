@@ -30,7 +30,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from tatl_mj.transfer.features import Features, as_states, periodic_difference, periodic_mask, wrap_angle
+from tatl_mj.transfer.features import (
+    Features,
+    LinearFeatures,
+    as_states,
+    periodic_difference,
+    periodic_mask,
+    wrap_angle,
+)
 from tatl_mj.transitions import Transitions
 
 
@@ -81,6 +88,21 @@ class Apprentice:
     @property
     def action_dim(self) -> int:
         return self.B.shape[1]
+
+    def affine(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(A, B, c)`` with ``predict(s, a) = A s + B a + c`` exactly, or None.
+
+        Exact for linear features without angles (``phi(s) = [1, s]`` or ``s``) and
+        no periodic coordinate: then a horizon's responses have closed forms.
+        """
+        f = self.features
+        if not isinstance(f, LinearFeatures) or f.periodic is not None or self.periodic is not None:
+            return None
+        d = self.state_dim
+        if self.W.shape[1] != d + int(f.bias):
+            return None
+        c = self.W[:, 0].copy() if f.bias else np.zeros(d)
+        return self.W[:, int(f.bias) :].copy(), self.B.copy(), c
 
     def drift(self, states: np.ndarray) -> np.ndarray:
         """F_hat(s) = W phi(s), (N, d), plus s on periodic coordinates (not wrapped).

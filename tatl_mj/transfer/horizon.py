@@ -133,6 +133,10 @@ class HorizonTATLPolicy:
       periodic: (dT,) bools marking angle coordinates (``apprentice.periodic``).
       source_zero: indices of source coordinates set to 0 in x_0 = chi_plus(s_T) before
         the source rollout (empty: none).
+      affine: optional (A, B, c) such that ``model(s, a) = A s + B a + c`` exactly (an
+        apprentice with linear features, :meth:`Apprentice.affine`; the oracle's
+        linearisation). F_j and G_j then come in closed form from powers of A instead
+        of H model calls: the same numbers up to rounding, a fraction of the time.
       delta: (mT,) finite-difference probe in actuator units (> 0); None means 10% of
         the actuator range (1 where the range is unbounded). The probe goes towards the
         inside of the range, so a clipping simulator sees the perturbation.
@@ -152,6 +156,7 @@ class HorizonTATLPolicy:
     target_actions: np.ndarray | None = None
     periodic: tuple[bool, ...] | None = None
     source_zero: tuple[int, ...] = ()
+    affine: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     delta: np.ndarray | None = None
     samples_used: int | None = None
 
@@ -229,6 +234,10 @@ class HorizonTATLPolicy:
                 raise ValueError(f"delta must be finite numbers > 0, one or {m} of them, got {self.delta!r}")
             delta = np.broadcast_to(delta.ravel(), (m,)).copy()
         object.__setattr__(self, "delta", delta)
+        if self.affine is not None:
+            if self.periodic is not None:
+                raise ValueError("affine (closed-form responses) cannot be used with periodic coordinates")
+            object.__setattr__(self, "_closed_form", _closed_form(self.affine, self.horizon, m))
 
     @property
     def source_steps(self) -> int:
@@ -269,9 +278,16 @@ class HorizonTATLPolicy:
         return s_hat_S, a_S, source_states, references
 
     def _responses(self, s_T: np.ndarray, nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """F (N, H, d) with a_0 held, and G (N, H, d, m) by finite differences."""
+        """F (N, H, d) with a_0 held, and G (N, H, d, m): closed forms, or finite differences."""
         n, d = s_T.shape
         m = nominal.shape[1]
+        if self.affine is not None:
+            powers, sums, control, c, b = self._closed_form  # type: ignore[attr-defined]
+            if powers.shape[1] != d:
+                raise ValueError(f"affine model has {powers.shape[1]} coordinates, states have {d}")
+            # F_j = A^j s + (sum_{i<j} A^i)(B a_0 + c)
+            free = np.einsum("jde,ne->njd", powers, s_T) + np.einsum("jde,ne->njd", sums, nominal @ b.T + c)
+            return free, np.broadcast_to(control, (n, *control.shape))
         # Probe towards the inside of the actuator range so a clipping model responds.
         step = np.where(nominal + self.delta <= self.target_high, self.delta, -self.delta)  # (N, m)
         actions = np.repeat(nominal[None], m + 1, axis=0)  # block 0 nominal, block i+1 probes column i
@@ -322,8 +338,31 @@ class HorizonTATLPolicy:
         return self.step(target_states).action
 
 
-def linearised(step: TargetModel, state_dim: int, action_dim: int, width: float = 1e-4) -> TargetModel:
-    """The exact linearisation of a one-step model at the zero state and action, as a model.
+def _closed_form(
+    affine: tuple[np.ndarray, np.ndarray, np.ndarray], horizon: int, m: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A^j and sum_{i<j} A^i for j = 1..H (H, d, d), G_j = (sum_{i<j} A^i) B (H, d, m), c, B."""
+    a, b, c = (np.asarray(x, dtype=np.float64) for x in affine)
+    b = b[:, None] if b.ndim == 1 else b
+    d = a.shape[0] if a.ndim == 2 else -1
+    if a.shape != (d, d) or b.shape != (d, m) or c.shape != (d,) or not all(np.all(np.isfinite(x)) for x in (a, b, c)):
+        raise ValueError(
+            f"affine must be finite (A (d, d), B (d, {m}), c (d,)), got shapes {a.shape}, {b.shape}, {c.shape}"
+        )
+    powers, sums = np.empty((horizon, d, d)), np.empty((horizon, d, d))
+    power, total = np.eye(d), np.zeros((d, d))
+    for j in range(horizon):
+        total = total + power
+        power = a @ power
+        powers[j], sums[j] = power, total
+    return powers, sums, sums @ b, c, b
+
+
+def linearised_parts(
+    step: TargetModel, state_dim: int, action_dim: int, width: float = 1e-4
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, c) of the exact linearisation of a one-step model at the zero state and
+    action: ``step(s, a) ~ A s + B a + c``.
 
     Central differences of ``step``, one query per call, so a simulator that draws
     its noise afresh from a fixed seed on every call (``sampling.step_values_from``)
@@ -341,11 +380,23 @@ def linearised(step: TargetModel, state_dim: int, action_dim: int, width: float 
         A[:, i] = (query(x0 + width * e, a0) - query(x0 - width * e, a0)) / (2 * width)
     for i, e in enumerate(np.eye(action_dim)):
         B[:, i] = (query(x0, a0 + width * e) - query(x0, a0 - width * e)) / (2 * width)
+    return A, B, f0
+
+
+def affine_model(parts: tuple[np.ndarray, np.ndarray, np.ndarray]) -> TargetModel:
+    """``s' = A s + B a + c`` as a batched model."""
+    A, B, c = parts
 
     def model(states: np.ndarray, action_values: np.ndarray) -> np.ndarray:
-        return f0 + np.asarray(states) @ A.T + np.asarray(action_values).reshape(len(states), -1) @ B.T
+        return c + np.asarray(states) @ A.T + np.asarray(action_values).reshape(len(states), -1) @ B.T
 
     return model
+
+
+def linearised(step: TargetModel, state_dim: int, action_dim: int, width: float = 1e-4) -> TargetModel:
+    """The exact linearisation of a one-step model at the zero state and action, as a model
+    (:func:`linearised_parts`)."""
+    return affine_model(linearised_parts(step, state_dim, action_dim, width))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -439,11 +490,12 @@ class HorizonTATL(TATL):
         if self.model == "oracle":
             if problem.target_step is None:
                 raise ValueError(f"{type(self).__name__}(model='oracle') needs the problem's target_step")
-            model, used, periodic = linearised(problem.target_step, target.state_dim, target.action_dim), None, None
+            parts = linearised_parts(problem.target_step, target.state_dim, target.action_dim)
+            model, used, periodic, affine = affine_model(parts), None, None, parts
         else:
             fitter = self if self.reference == "source" else dataclasses.replace(self, zeta=None)
             apprentice, used = fitter.fit_apprentice(problem, target_samples)
-            model, periodic = apprentice.predict, apprentice.periodic
+            model, periodic, affine = apprentice.predict, apprentice.periodic, apprentice.affine()
         ratio = self.step_ratio
         if ratio is None:
             ratio = problem.source.control_timestep / target.control_timestep
@@ -467,9 +519,19 @@ class HorizonTATL(TATL):
             weights=np.asarray(self.weights, dtype=np.float64) if self.weights else None,
             reference=self.reference,
             periodic=periodic if periodic and any(periodic) else None,
+            affine=affine,
             samples_used=used,
             **source,
         )
 
 
-__all__ = ["REFERENCES", "HorizonStep", "HorizonTATL", "HorizonTATLPolicy", "TargetModel", "linearised"]
+__all__ = [
+    "REFERENCES",
+    "HorizonStep",
+    "HorizonTATL",
+    "HorizonTATLPolicy",
+    "TargetModel",
+    "affine_model",
+    "linearised",
+    "linearised_parts",
+]
