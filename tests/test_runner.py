@@ -217,3 +217,28 @@ def test_a_variant_runs_under_its_own_name_and_equals_its_built_in(tmp_path):
     assert [p["returns"] for p in curves[0]] == [p["returns"] for p in curves[1]]
     with pytest.raises(ValueError, match="unknown method 'copyy' for ip_to_flipped_ip; valid methods: .*'copy'"):
         runner.run([spec], "tiny", [0], tmp_path / "other", workers=1, progress=False, methods=["copyy"])
+
+
+def test_paper_protocol_data_are_collected_once_and_nest_across_budgets():
+    # Each budget's head of one largest collection is exactly a fresh collection of that size.
+    from tatl_mj.experiments import pipeline
+
+    spec = spec_mod.load_spec(ROOT / "tasks" / "grid_to_windy.toml")
+
+    def policy(states):
+        return (states[:, 0] + 2 * states[:, 1]).astype(np.int64) % 4
+
+    calls = []
+
+    def collect(pol, n):
+        calls.append(n)
+        return pipeline._policy_samples(spec, 0, pol, n)
+
+    nested = pipeline._nested_samples(collect, 300)
+    for n in (37, 120, 300):
+        got, fresh = nested(policy, n), pipeline._policy_samples(spec, 0, policy, n)
+        for field in dataclasses.fields(fresh):
+            np.testing.assert_array_equal(getattr(got, field.name), getattr(fresh, field.name), err_msg=field.name)
+    assert calls == [300]
+    nested(lambda states: policy(states), 50)  # another policy: collected afresh
+    assert calls == [300, 300]

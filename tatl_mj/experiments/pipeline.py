@@ -274,6 +274,31 @@ def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -
     return sampling.policy_transitions(env, index_policy, n, actions, max_episode_steps=target.data.episode_steps)
 
 
+def _nested_samples(
+    collect: Callable[[Callable, int], Transitions], largest: int
+) -> Callable[[Callable, int], Transitions]:
+    """``policy_samples`` that collects once per policy and answers each budget with a head.
+
+    The budgets of a run nest: the first call for a policy collects
+    ``max(n, largest)`` transitions, later calls take the first n. That is what a
+    fresh collection of n gives (episodes from the same seeded resets, in order,
+    the last one cut at n: its final transition is marked ``last``; tested), for
+    about half the stepping when budgets grow geometrically.
+    """
+    cache: dict[int, tuple[Callable, Transitions]] = {}
+
+    def samples(policy: Callable, n: int) -> Transitions:
+        entry = cache.get(id(policy))
+        if entry is None or entry[0] is not policy or len(entry[1]) < n:
+            entry = cache[id(policy)] = (policy, collect(policy, max(n, largest)))  # holding policy keeps its id
+        head = entry[1].head(n)
+        last = head.last.copy()
+        last[-1] = True
+        return dataclasses.replace(head, last=last)
+
+    return samples
+
+
 def _as_indices(policy: Callable, action_values: np.ndarray) -> Callable:
     """A policy over action values as one over the nearest discrete action's index."""
 
@@ -362,7 +387,7 @@ def transfer_problem(
         target_return=target_return,
         model_return=_model_return(spec, preset, seed),
         target_step=partial(_target_step, spec.target, target),
-        policy_samples=partial(_policy_samples, spec, seed),
+        policy_samples=_nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets)),
     )
 
 

@@ -91,13 +91,21 @@ class TransferProblem:
         return self.target.n_actions
 
     def projected_source_policy(self) -> Policy:
-        """pi_hat(s_T) = pi*_S(chi_plus(s_T)), carried to the target action of the same index."""
+        """pi_hat(s_T) = pi*_S(chi_plus(s_T)), carried to the target action of the same index.
+
+        The same object on every call, so that hooks may cache by policy (the
+        paper-protocol data of ``policy_samples`` is collected once per problem).
+        """
+        cached = self.__dict__.get("_projected_source_policy")
+        if cached is not None:
+            return cached
         source_q, mapping, target = self.source_q, self.mapping, self.target
 
         def policy(states: np.ndarray) -> np.ndarray:
             index = source_q.greedy(mapping.chi_plus(states))
             return index if target.discrete else target.action_values[index]
 
+        object.__setattr__(self, "_projected_source_policy", policy)  # frozen: a cache, not a field
         return policy
 
     @property
