@@ -100,9 +100,9 @@ class _Simulator:
         self.blank_row = np.empty(mujoco.mj_stateSize(self.model, _INTEGRATION))
         mujoco.mj_getState(self.model, data, self.blank_row, _INTEGRATION)
         self._batch: mujoco.batch.Batch | None = None
-        # Live views of batches' state fields (Batch.bind builds one per call, ~15 us,
-        # five a step: as much as a small batch's physics). Holding the batch keeps its id.
-        self._views: dict[int, tuple[mujoco.batch.Batch, dict[str, np.ndarray]]] = {}
+        # Live views of the query batch's state fields: Batch.bind builds one per call
+        # (~15 us, five a query, as much as a small batch's physics).
+        self._views: dict[str, np.ndarray] = {}
         # dm_control's legacy step (every integrator but RK4) starts a step with
         # mj_step2 on the stages of the last forward pass; after a reset that is
         # Physics.after_reset's (by default run with actuation disabled, which
@@ -127,6 +127,7 @@ class _Simulator:
         """
         if self._batch is None or self._batch.nsim < nsim:
             self._batch = self.new_batch(nsim)
+            self._views = {}
         return self._batch
 
     def step_limit(self, max_episode_steps: int | None) -> float:
@@ -144,16 +145,12 @@ class _Simulator:
         return time_limit / (self.physics.timestep() * self.n_sub)
 
     def bound(self, batch: mujoco.batch.Batch, name: str) -> np.ndarray:
-        """``batch.bind(name)`` for the state fields qpos, qvel and ctrl, made once per batch."""
-        entry = self._views.get(id(batch))
-        if entry is None or entry[0] is not batch:
-            if len(self._views) >= 8:  # collect() and evaluate() make a batch per call
-                self._views.clear()
-            entry = self._views[id(batch)] = (batch, {})
-        views = entry[1]
-        if name not in views:
-            views[name] = batch.bind(name)
-        return views[name]
+        """``batch.bind(name)``, made once for the query batch (the per-decision hot path)."""
+        if batch is not self._batch:
+            return batch.bind(name)
+        if name not in self._views:
+            self._views[name] = batch.bind(name)
+        return self._views[name]
 
     def place(self, batch: mujoco.batch.Batch, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Puts simulations ``ids`` at a fresh reset's state with these qpos and qvel.

@@ -11,6 +11,8 @@
 
 import numpy as np
 import pytest
+from test_transfer_tatl import CHI, SOURCE_ACTIONS, OneStepLQRQ, source_step
+from test_transfer_tatl import target_step as tatl_target_step
 
 from tatl_mj.transfer.alignment import AffineMapping
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice
@@ -20,33 +22,9 @@ from tatl_mj.transfer.tatl import TATLPolicy
 
 # --- The fixture of test_transfer_tatl ------------------------------------------------
 
-DT = 0.1
-A = np.array([[1.0, DT], [0.0, 1.0]])
-b = np.array([0.5 * DT**2, DT])
-SOURCE_ACTIONS = np.array([[-1.0], [0.0], [1.0]])
-CHI = AffineMapping(np.array([[0.0, 2.0], [-0.5, 0.0]]), np.array([1.0, -2.0]))
-
-
-class OneStepLQRQ:
-    """Q_S(x, a) = -(x'^T x' + 0.1 a^2), x' = A x + b a."""
-
-    n_actions = 3
-
-    def values(self, x):
-        nxt = x[:, None, :] @ A.T + SOURCE_ACTIONS[None, :, 0, None] * b
-        return -(np.sum(nxt**2, axis=2) + 0.1 * SOURCE_ACTIONS[None, :, 0] ** 2)
-
-    def greedy(self, x):
-        return np.argmax(self.values(x), axis=1)
-
-
-def source_step(x, a_idx):
-    return x @ A.T + np.outer(SOURCE_ACTIONS[a_idx, 0], b)
-
 
 def target_step(s_T, a_T, gain=2.5, kappa=np.array([0.8, -0.3]), c=0.4):
-    x = CHI.chi_plus(s_T)
-    return CHI.chi(x @ A.T + np.outer(gain * a_T[:, 0] + x @ kappa + c, b))
+    return tatl_target_step(s_T, a_T, gain, kappa, c)
 
 
 def _noisy_apprentice(seed=0):

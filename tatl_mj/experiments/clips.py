@@ -64,8 +64,8 @@ def render_from_spec(
     with_source: bool = False,
 ) -> Path:
     suffix = Path(out).suffix.lower()
-    if suffix not in (".mp4", ".gif"):
-        raise ValueError(f"clip path must end in .mp4 or .gif, got {out!r}")
+    if suffix not in render.CLIP_EXTENSIONS:
+        raise ValueError(f"clip path must end in one of {render.CLIP_EXTENSIONS}, got {out!r}")
     spec = load_spec(spec_path)
     spec.preset(preset)  # an unknown preset fails here, naming the valid ones
     target = spec.target
