@@ -6,6 +6,9 @@ with physics (cart-pole, pendulum, mountain car and bicycle today):
 - ``dm_control``: a Python loop over the environment's ``step`` with random
   actions (resetting at episode ends), the way a hand-written collector works,
   also given as simulated seconds per wall-clock second (``real_time_factor``);
+- ``dm_control_floor``: the same loop over the same physics with a task that
+  does nothing: dm_control's own cost per step, the most any dm_control loop of
+  this physics can reach here;
 - ``sampler``: :func:`tatl_mj.sampling.collect`, whole random episodes in
   lockstep on ``--threads`` MuJoCo threads, task logic included;
 - ``rollout``: raw ``mujoco.rollout`` of the bare model, open loop, no task
@@ -146,6 +149,49 @@ def time_dm_control(domain: str, task: str, seconds: float, seed: int = 0) -> di
                 # simulated seconds per wall-clock second
                 "real_time_factor": steps * env.control_timestep() / elapsed,
             }
+
+
+def time_dm_control_floor(domain: str, task: str, seconds: float, seed: int = 0) -> dict[str, Any]:
+    """dm_control's own cost per step: ``control.Environment`` over the same physics, bare task.
+
+    The task does no work (a constant observation, zero reward, full control
+    vectors set as given; episodes start where the domain's start), so this is
+    the fastest any dm_control task's loop over this physics can go here.
+    """
+    import collections
+
+    from dm_control.rl import control
+    from dm_control.suite import base
+
+    from tatl_mj import suite
+
+    env = suite.load(domain, task, task_kwargs={"random": seed})
+    domain_task = env.task
+    observation = collections.OrderedDict(state=np.zeros(1))
+
+    class Bare(base.Task):
+        def initialize_episode(self, physics: Any) -> None:
+            qpos, qvel = domain_task.start_configurations(physics, 1)
+            physics.data.qpos[:], physics.data.qvel[:] = qpos[0], qvel[0]
+
+        def get_observation(self, physics: Any) -> collections.OrderedDict:
+            return observation
+
+        def get_reward(self, physics: Any) -> float:
+            return 0.0
+
+    bare = control.Environment(env.physics, Bare(random=seed), control_timestep=env.control_timestep())
+    controls = domain_task.controls(np.asarray(suite.action_set(domain), np.float64), domain_task.random)
+    rng = np.random.default_rng(seed)
+    steps, start = 0, time.perf_counter()
+    while True:
+        bare.reset()  # every 100 steps, about as often as random episodes end
+        for a in rng.integers(len(controls), size=100):
+            bare.step(controls[a])
+        steps += 100
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed}
 
 
 def time_sampler(domain: str, task: str, seconds: float, threads: int, seed: int = 0) -> dict[str, Any]:
@@ -338,6 +384,7 @@ def run(args: argparse.Namespace) -> int:
         task = physics[domain]
         figures = {
             "dm_control": time_dm_control(domain, task, args.seconds / 2),
+            "dm_control_floor": time_dm_control_floor(domain, task, args.seconds / 2),
             "sampler": time_sampler(domain, task, args.seconds, args.threads),
             "rollout": time_rollout(domain, task, args.seconds / 2, args.threads),
         }
@@ -359,9 +406,17 @@ def run(args: argparse.Namespace) -> int:
         per_domain[domain]["rollout_vs_dm_control"] = (
             figures["rollout"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
         )
+        # What the task's own logic leaves of dm_control's loop over this physics.
+        per_domain[domain]["dm_control_vs_floor"] = (
+            figures["dm_control"]["steps_per_s"] / figures["dm_control_floor"]["steps_per_s"]
+        )
         if "gymnasium" in figures:
             per_domain[domain]["sampler_vs_gymnasium"] = (
                 figures["sampler"]["steps_per_s"] / figures["gymnasium"]["steps_per_s"]
+            )
+            # The most any MuJoCo sampler of this physics could reach against Gymnasium.
+            per_domain[domain]["rollout_vs_gymnasium"] = (
+                figures["rollout"]["steps_per_s"] / figures["gymnasium"]["steps_per_s"]
             )
     extra: dict[str, Any] = {}
     # Memory first, so that the process's peak RSS is not FQI's or the renderer's.
@@ -391,7 +446,7 @@ def _print_record(record: dict[str, Any]) -> None:
         real_time = f", {record['real_time_factor']:.0f}x real time" if "real_time_factor" in record else ""
         peer = f", {record['env_id']}" if "env_id" in record else ""
         print(
-            f"{record['domain']:>13} {record['path']:>10}: {record['steps_per_s']:>11,.0f} steps/s "
+            f"{record['domain']:>13} {record['path']:>16}: {record['steps_per_s']:>11,.0f} steps/s "
             f"({record['steps']} steps in {record['seconds']:.2f} s{real_time}{peer})"
         )
     elif "skipped" in record:
@@ -414,11 +469,13 @@ def _print_record(record: dict[str, Any]) -> None:
         for domain, figures in record["domains"].items():
             peer = (
                 f", {figures['sampler_vs_gymnasium']:.2f}x Gymnasium's loop"
+                f" (raw rollout itself: {figures['rollout_vs_gymnasium']:.2f}x)"
                 if "sampler_vs_gymnasium" in figures
                 else ""
             )
             print(
                 f"{domain:>13}: sampler {figures['sampler_vs_dm_control']:.1f}x dm_control, "
-                f"{figures['sampler_vs_rollout']:.2f}x raw rollout{peer} "
-                f"(raw rollout itself: {figures['rollout_vs_dm_control']:.1f}x dm_control)"
+                f"{figures['sampler_vs_rollout']:.2f}x raw rollout{peer}; "
+                f"raw rollout {figures['rollout_vs_dm_control']:.1f}x dm_control; "
+                f"dm_control loop {figures['dm_control_vs_floor']:.2f}x dm_control's own floor"
             )

@@ -259,15 +259,21 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     paths = {r["path"] for r in records if r["kind"] == "steps"}
     has_gymnasium = importlib.util.find_spec("gymnasium") is not None
-    assert paths == {"dm_control", "sampler", "rollout"} | ({"gymnasium"} if has_gymnasium else set())
+    assert paths == {"dm_control", "dm_control_floor", "sampler", "rollout"} | (
+        {"gymnasium"} if has_gymnasium else set()
+    )
     summary = records[-1]
     assert summary["kind"] == "summary"
     for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s", "rollout_vs_dm_control"):
         assert summary[key] > 0
+    assert summary["dm_control_vs_floor"] == pytest.approx(
+        summary["dm_control_steps_per_s"] / summary["dm_control_floor_steps_per_s"]
+    )
     if has_gymnasium:
         peer = next(r for r in records if r.get("path") == "gymnasium")
         assert peer["env_id"] == "CartPole-v1" and peer["steps"] >= 100
         assert summary["sampler_vs_gymnasium"] == pytest.approx(summary["sampler_steps_per_s"] / peer["steps_per_s"])
+        assert summary["rollout_vs_gymnasium"] == pytest.approx(summary["rollout_steps_per_s"] / peer["steps_per_s"])
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
 
@@ -297,7 +303,7 @@ def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch)
     assert bench.run(args) == 0
     out = capsys.readouterr().out
     assert "gymnasium for pendulum: skipped (gymnasium is not installed" in out
-    assert "pendulum    sampler" in out and "Gymnasium's loop" not in out
+    assert "pendulum          sampler" in out and "Gymnasium's loop" not in out
 
 
 def test_expected_lengths_count_running_episodes_as_censored():
@@ -325,3 +331,99 @@ def test_transitions_save_and_load_round_trip(tmp_path):
     for name in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
         np.testing.assert_array_equal(getattr(back, name), getattr(tr, name))
         assert getattr(back, name).dtype == getattr(tr, name).dtype
+
+
+# --- Several control steps in one call (random actions) ------------------------------
+
+FIELDS = ("states", "actions", "rewards", "next_states", "absorbing", "last")
+
+
+def assert_same_transitions(a, b):
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+@pytest.mark.parametrize(
+    "domain,task,n,kwargs",
+    [
+        ("bicycle", "balance", 3000, {}),  # rider noise: both random streams wound back
+        ("mountain_car", "climb", 3000, {}),  # time-limit ends foreseen
+        ("mountain_car", "climb", 1500, {"max_episode_steps": 37, "n_parallel": 5}),
+        ("cartpole", "balance", 2000, {"n_parallel": 1}),
+        ("pendulum", "swingup", 1000, {}),
+    ],
+)
+def test_steps_in_one_call_are_the_lockstep_passes(domain, task, n, kwargs, monkeypatch):
+    calls = []
+    real = sampling._Simulator.advance_steps
+
+    def counting(self, batch, ids, controls):
+        calls.append(controls.shape[:2])
+        return real(self, batch, ids, controls)
+
+    monkeypatch.setattr(sampling._Simulator, "advance_steps", counting)
+    many = sampling.collect(domain, task, n, seed=7, **kwargs)
+    assert calls and max(k for k, _ in calls) > 1  # the multi-step path ran
+    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)  # one control step per pass
+    calls.clear()
+    one = sampling.collect(domain, task, n, seed=7, **kwargs)
+    assert not calls
+    assert_same_transitions(many, one)
+
+
+def test_steps_refused_by_mujoco_are_stepped_one_at_a_time(monkeypatch):
+    # advance_steps gives up (MuJoCo warned) and puts the simulations back:
+    # the pass then steps once, with the random streams as they were.
+    refused = []
+
+    def refuse(self, batch, ids, controls):
+        refused.append(len(controls))
+        return None
+
+    monkeypatch.setattr(sampling._Simulator, "advance_steps", refuse)
+    got = sampling.collect("bicycle", "balance", 800, seed=3)
+    assert refused
+    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)
+    assert_same_transitions(got, sampling.collect("bicycle", "balance", 800, seed=3))
+
+
+def test_advance_steps_gives_up_on_a_diverging_simulation():
+    sim = sampling._simulator("cartpole", "balance", None, 2)
+    batch = sim.new_batch(2)
+    ids = np.arange(2)
+    sim.place(batch, ids, *sim.physics.qpos_qvel_from(np.array([[0.0, 0.0, 0.1, 0.0], [0.0, 2e10, 0.0, 0.0]])))
+    rows = batch.state.copy()
+    assert sim.advance_steps(batch, ids, np.zeros((4, 2, 1))) is None
+    np.testing.assert_array_equal(batch.state, rows)
+    # Without the diverging one, 4 steps in one call are 4 single steps.
+    one = sim.new_batch(1)
+    one.state[0] = rows[0]
+    states, after = sim.advance_steps(one, ids[:1], np.zeros((4, 1, 1)))
+    single = sim.new_batch(1)
+    single.state[0] = rows[0]
+    for k in range(4):
+        step, _ = sim.advance(single, ids[:1], np.zeros((1, 1)), np.array([False]))
+        np.testing.assert_array_equal(states[k], step)
+        np.testing.assert_array_equal(after[0, k], single.state[0])
+
+
+@pytest.mark.parametrize("domain,task", BATCHED_TASKS)
+def test_controls_draw_row_after_row(domain, task):
+    # The multi-step path draws the noise of K steps in one call.
+    env = suite.load(domain, task, task_kwargs={"random": 0})
+    values = np.asarray(suite.action_set(domain), np.float64)[np.arange(12) % len(suite.action_set(domain))]
+    values = values.reshape(12, -1)
+    whole = env.task.controls(values, np.random.RandomState(4))
+    random = np.random.RandomState(4)
+    parts = np.concatenate([env.task.controls(values[i : i + 5], random) for i in range(0, 12, 5)])
+    np.testing.assert_array_equal(whole, parts)
+
+
+def test_steps_to_cover_counts_the_live_episodes_before_each():
+    # Episodes of 5, 3 and 2 steps, the last two running: after j more steps
+    # episode 1 holds 5 + 3 + j and episode 2 holds 5 + 3 + 2 + 2j transitions.
+    episodes = sampling._Episodes(20)
+    for length in (5, 3, 2):
+        episodes.lengths[episodes.start()] = length
+    np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 20), [12, 5])
+    np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 21), [13, 6])

@@ -249,3 +249,38 @@ def test_describe_gives_the_known_model_only_where_it_is_exact():
     assert suite.describe("pendulum", "swingup").angle_origin == (np.pi, 0.0)
     with pytest.raises(ValueError, match="unknown task_kwargs \\['wind'\\]"):
         suite.describe("gridworld", "windy", {"wind": 2})
+
+
+# --- cost of a step -----------------------------------------------------------------
+
+
+def test_a_step_computes_the_state_once_and_forgets_it():
+    env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
+    env.reset()
+    physics = env.physics
+    calls = []
+    state_vector = type(physics).state_vector
+
+    def counting(self):
+        calls.append(1)
+        return state_vector(self)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(type(physics), "state_vector", counting)
+        timestep = env.step(np.zeros(1))
+        assert len(calls) == 1  # reward, observation and termination share it
+        np.testing.assert_array_equal(timestep.observation["state"], state_vector(physics))
+    # Once the step has returned, the task reads the physics afresh.
+    physics.set_state_vector(np.array([0.0, 0.0, 0.5, 0.0]))  # past 12 degrees
+    assert env.task.get_termination(physics) == 0.0 and env.task.get_reward(physics) == 0.0
+    np.testing.assert_array_equal(env.task.get_observation(physics)["state"], [0.0, 0.0, 0.5, 0.0])
+
+
+def test_models_are_compiled_once_and_never_shared():
+    a = suite.load("pendulum", "swingup", task_kwargs={"random": 0})
+    b = suite.load("pendulum", "swingup", task_kwargs={"random": 0})
+    assert a.physics.model.ptr is not b.physics.model.ptr
+    a.physics.model.body_mass[1] *= 2.0  # a runtime model edit stays with its own physics
+    assert b.physics.model.body_mass[1] * 2.0 == a.physics.model.body_mass[1]
+    c = suite.load("pendulum", "swingup", task_kwargs={"random": 0})
+    assert c.physics.model.body_mass[1] == b.physics.model.body_mass[1]

@@ -438,7 +438,7 @@ def balance(
 ) -> common.Environment:
     """Bicycle balance at ``speed`` m/s with rider noise up to ``cg_noise`` m."""
     task = Task(speed=speed, cg_noise=cg_noise, random=random)
-    physics = Physics.from_xml_string(*model_xml(params))
+    physics = common.compile_physics(Physics, *model_xml(params))
     physics.set_target_speed(task.speed)
     return common.Environment(
         physics,
@@ -468,7 +468,7 @@ def lateral_eigenvalues(speed: float, params: BicycleParams | None = None, settl
     """
     if not (math.isfinite(speed) and speed > 0):
         raise ValueError(f"speed must be a positive number of m/s, got {speed!r}")
-    physics = Physics.from_xml_string(*model_xml(params))
+    physics = common.compile_physics(Physics, *model_xml(params))
     physics.set_target_speed(speed)
     model, data = physics.model.ptr, physics.data.ptr
     qpos, qvel = physics.qpos_qvel_from(np.zeros((1, Physics.STATE_SIZE)))

@@ -97,7 +97,7 @@ class Physics(common.StatePhysics):
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         # qpos = [slider, hinge], qvel likewise: the state interleaves them.
         qpos, qvel = np.asarray(qpos, np.float64), np.asarray(qvel, np.float64)
-        return np.stack([qpos[:, 0], qvel[:, 0], qpos[:, 1], qvel[:, 1]], axis=1)
+        return np.concatenate((qpos, qvel), axis=1)[:, [0, 2, 1, 3]]
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = np.asarray(states, np.float64)
@@ -147,7 +147,7 @@ def balance(
     params: CartPoleParams | None = None,
 ) -> common.Environment:
     """Cart-pole balance; ``params`` changes the physical constants."""
-    physics = Physics.from_xml_string(*model_xml(params))
+    physics = common.compile_physics(Physics, *model_xml(params))
     return common.Environment(
         physics,
         Task(random=random),

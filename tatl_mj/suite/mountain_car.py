@@ -255,7 +255,8 @@ class Physics(common.StatePhysics):
         return kinetic + potential
 
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
-        return np.stack([qpos[:, X_INDEX], qvel[:, X_INDEX] * VELOCITY_SCALE], axis=1)
+        # concatenate, not stack: half the cost for one row (dm_control's loop)
+        return np.concatenate((qpos[:, X_INDEX, None], qvel[:, X_INDEX, None] * VELOCITY_SCALE), axis=1)
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # On the track, moving along it: the hinges at the angles the equalities ask.
@@ -296,7 +297,7 @@ def _build_hill(physics: Physics) -> None:
 
 def make_physics(params: MountainCarParams | None = None) -> Physics:
     """Compiles the model with ``params`` and fills in the drawn hill."""
-    physics = Physics.from_xml_string(*model_xml(params))
+    physics = common.compile_physics(Physics, *model_xml(params))
     _build_hill(physics)
     return physics
 

@@ -92,7 +92,7 @@ class Physics(common.StatePhysics):
 
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         qpos, qvel = np.asarray(qpos, np.float64), np.asarray(qvel, np.float64)
-        return np.stack([wrap_angle(qpos[:, 0]), qvel[:, 0]], axis=1)
+        return np.concatenate((wrap_angle(qpos[:, :1]), qvel[:, :1]), axis=1)
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = np.asarray(states, np.float64)
@@ -159,7 +159,7 @@ class Physics(common.StatePhysics):
 def make_physics(params: PendulumParams | None = None, flipped: bool = False) -> Physics:
     """A compiled pendulum with ``params`` applied; ``flipped`` reverses the control's sign."""
     params = as_params(params)
-    physics = Physics.from_xml_string(*common.read_model("pendulum.xml"))
+    physics = common.compile_physics(Physics, *common.read_model("pendulum.xml"))
     model = physics.named.model
     model.actuator_gear["torque"][0] = -1.0 if flipped else 1.0
     model.actuator_ctrlrange["torque"] = (-params.max_torque, params.max_torque)
