@@ -247,6 +247,8 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
             "cartpole",
             "--seconds",
             "0.05",
+            "--repeats",
+            "2",
             "--memory-transitions",
             "3000",
             "--fqi-transitions",
@@ -262,6 +264,8 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     assert paths == {"dm_control", "dm_control_floor", "sampler", "rollout"} | (
         {"gymnasium"} if has_gymnasium else set()
     )
+    for record in (r for r in records if r["kind"] == "steps"):  # the faster of two runs
+        assert record["repeats"] == 2 and record["slowest_steps_per_s"] <= record["steps_per_s"]
     summary = records[-1]
     assert summary["kind"] == "summary"
     for key in ("sampler_steps_per_s", "dm_control_steps_per_s", "rollout_steps_per_s", "rollout_vs_dm_control"):
@@ -276,6 +280,8 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
         assert summary["rollout_vs_gymnasium"] == pytest.approx(summary["rollout_steps_per_s"] / peer["steps_per_s"])
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
+    assert bench.run(parser.parse_args(["--repeats", "0"])) == 2
+    assert "--repeats must be >= 1" in capsys.readouterr().out
 
 
 def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch):
