@@ -419,7 +419,8 @@ def collect(
     while True:  # one lockstep of every live episode per pass, or several in one call
         free = np.flatnonzero(slot_episode < 0)
         running = episodes.lengths[slot_episode[slot_episode >= 0]]
-        n_start = _episodes_to_start(len(free), episodes.total(), n, np.asarray(ended), running, limit)
+        ended_lengths = np.asarray(ended)
+        n_start = _episodes_to_start(len(free), episodes.total(), n, ended_lengths, running, limit)
         if n_start:
             starts = free[:n_start]
             sim.start_episodes(batch, starts, env)
@@ -431,7 +432,7 @@ def collect(
         ep = slot_episode[live]
         states = physics.states_from(qpos[live], qvel[live])
         if policy is None and plan > 1 and episodes.lengths[ep].all():
-            quiet = _quiet_steps(plan, ep, episodes, n, limit, len(free) - n_start, np.asarray(ended))
+            quiet = _quiet_steps(plan, ep, episodes, n, limit, len(free) - n_start, ended_lengths)
             if quiet > 1:
                 taken = _collect_steps(sim, task_obj, batch, live, ep, states, quiet, rng, episodes, n, limit, chunks)
                 if taken is not None:

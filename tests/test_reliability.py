@@ -108,13 +108,18 @@ def test_sigkill_of_the_main_process_leaves_no_worker_or_tracker(tmp_path):
         # Two pool workers and the resource tracker.
         wait_for(lambda: len(descendants(proc.pid)) >= 3, 120, "the workers to start")
         children = descendants(proc.pid)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-        wait_for(lambda: not [p for p in children if _stat(p)], 10, f"children {children} to end")
+        _sigkill_and_wait(proc, children, 10, f"children {children} to end")
     finally:
         proc.kill()
         proc.wait()
         _kill_survivors(locals().get("children", set()))
+
+
+def _sigkill_and_wait(proc: subprocess.Popen, children: set[int], seconds: float, what: str) -> None:
+    """SIGKILLs the run's main process, then waits for every one of ``children`` to be gone."""
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    wait_for(lambda: not [p for p in children if _stat(p)], seconds, what)
 
 
 def _names(pids: set[int]) -> dict[int, str]:
@@ -138,9 +143,7 @@ def test_sigkill_of_the_main_process_leaves_no_ray_process(tmp_path):
         children = descendants(proc.pid)
         names = _names(children)
         assert {"gcs_server", "raylet"} <= set(names.values()), names
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-        wait_for(lambda: not [p for p in children if _stat(p)], 5, f"Ray processes {names} to end")
+        _sigkill_and_wait(proc, children, 5, f"Ray processes {names} to end")
     finally:
         proc.kill()
         proc.wait()
