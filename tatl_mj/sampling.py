@@ -46,8 +46,10 @@ the same task ``random`` then feeds ``Task.controls`` (rider noise), and a
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import inspect
+import weakref
 from typing import Any, Callable
 
 import dm_env
@@ -108,9 +110,10 @@ class _Simulator:
         self.blank_row = np.empty(mujoco.mj_stateSize(self.model, _INTEGRATION))
         mujoco.mj_getState(self.model, data, self.blank_row, _INTEGRATION)
         self._batch: mujoco.batch.Batch | None = None
-        # Live views of the query batch's state fields: Batch.bind builds one per call
-        # (~15 us, five a query, as much as a small batch's physics).
-        self._views: dict[str, np.ndarray] = {}
+        # Live views of each batch's fields: Batch.bind builds one per call (~15 us,
+        # five a query or a collection's pass, as much as a small batch's physics).
+        self._views: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._spare_env: dm_env.Environment | None = None
         # dm_control's legacy step (every integrator but RK4) starts a step with
         # mj_step2 on the stages of the last forward pass; after a reset that is
         # Physics.after_reset's (by default run with actuation disabled, which
@@ -122,6 +125,25 @@ class _Simulator:
 
     def make_env(self, random: Any) -> dm_env.Environment:
         return suite.load(self.domain, self.task_name, task_kwargs={**self.kwargs, "random": random})
+
+    @contextlib.contextmanager
+    def seeded_env(self, seed: int) -> Any:
+        """What ``make_env(seed)`` gives, for collect() and evaluate() to draw from.
+
+        Building an environment costs ~20 ms (dm_control's Physics and its
+        indexers), as much as collecting 1,000 cart-pole transitions; one is kept
+        and its task's random stream reseeded in place, which is what a new
+        ``RandomState(seed)`` is. A nested use (a policy that collects) gets a new one.
+        """
+        env, self._spare_env = self._spare_env, None
+        if env is None or isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            env = self.make_env(seed)
+        else:
+            env.task.random.seed(seed)
+        try:
+            yield env
+        finally:
+            self._spare_env = env
 
     def new_batch(self, nsim: int) -> mujoco.batch.Batch:
         """A Batch of ``nsim`` simulations of the task's model (about 2 ms to make)."""
@@ -135,7 +157,6 @@ class _Simulator:
         """
         if self._batch is None or self._batch.nsim < nsim:
             self._batch = self.new_batch(nsim)
-            self._views = {}
         return self._batch
 
     def step_limit(self, max_episode_steps: int | None) -> float:
@@ -153,12 +174,11 @@ class _Simulator:
         return time_limit / (self.physics.timestep() * self.n_sub)
 
     def bound(self, batch: mujoco.batch.Batch, name: str) -> np.ndarray:
-        """``batch.bind(name)``, made once for the query batch (the per-decision hot path)."""
-        if batch is not self._batch:
-            return batch.bind(name)
-        if name not in self._views:
-            self._views[name] = batch.bind(name)
-        return self._views[name]
+        """``batch.bind(name)``, made once per batch (the per-step hot path)."""
+        views = self._views.setdefault(batch, {})
+        if name not in views:
+            views[name] = batch.bind(name)
+        return views[name]
 
     def place(self, batch: mujoco.batch.Batch, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Puts simulations ``ids`` at a fresh reset's state with these qpos and qvel.
@@ -169,13 +189,15 @@ class _Simulator:
         self.bound(batch, "qpos")[ids] = qpos
         self.bound(batch, "qvel")[ids] = qvel
 
-    def start_episodes(self, batch: mujoco.batch.Batch, ids: np.ndarray, env: Any) -> None:
+    def start_episodes(self, batch: mujoco.batch.Batch, ids: np.ndarray, env: Any) -> np.ndarray:
         """Puts simulations ``ids`` at the starts of ``env``'s next ``len(ids)`` episodes.
 
         One call of the task's ``start_configurations`` draws what as many
-        successive resets of ``env`` would.
+        successive resets of ``env`` would. Returns their paper states.
         """
-        self.place(batch, ids, *env.task.start_configurations(env.physics, len(ids)))
+        qpos, qvel = env.task.start_configurations(env.physics, len(ids))
+        self.place(batch, ids, qpos, qvel)
+        return self.physics.states_from(qpos, qvel)
 
     def advance(
         self,
@@ -191,7 +213,7 @@ class _Simulator:
         """
         self.bound(batch, "ctrl")[ids] = controls
         warnings = batch.warning[:, :, _WARNING_NUMBER]
-        before = warnings[ids].copy()
+        before = warnings.sum(axis=1)  # counts only grow: a new warning changes the sum
         diverged = np.zeros(len(ids), bool)
         if self.legacy_first and first.any():
             for k in np.flatnonzero(first):
@@ -204,7 +226,7 @@ class _Simulator:
         else:
             batch.step(ids, nstep=self.n_sub)
         # Any new MuJoCo warning is a PhysicsError in dm_control.
-        diverged |= (warnings[ids] != before).any(axis=1)
+        diverged |= (warnings.sum(axis=1) != before)[ids]
         states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
@@ -316,18 +338,34 @@ def _observed_state(timestep: dm_env.TimeStep) -> np.ndarray:
 
 
 class _Episodes:
-    """Lengths of started episodes and which ones the first n transitions still need."""
+    """Lengths of started episodes, which ones the first n transitions still need, and
+    how many ended after each number of steps."""
 
     def __init__(self, n: int):
         self.n = n
         self.lengths = np.zeros(64, np.int64)
         self.count = 0
+        # ended[k]: episodes that ended after k steps (the schedule's survival data;
+        # a histogram, since sorting every ended length each pass cost as much as the step)
+        self.ended = np.zeros(64, np.int64)
 
-    def start(self) -> int:
-        if self.count == len(self.lengths):
+    def start(self, k: int) -> np.ndarray:
+        """The numbers of ``k`` new episodes."""
+        while self.count + k > len(self.lengths):
             self.lengths = np.concatenate([self.lengths, np.zeros_like(self.lengths)])
-        self.count += 1
-        return self.count - 1
+        self.count += k
+        return np.arange(self.count - k, self.count)
+
+    def end(self, episodes: np.ndarray) -> None:
+        if len(episodes) == 0:
+            return
+        lengths = self.lengths[episodes]
+        size = len(self.ended)
+        while lengths.max() >= size:
+            size *= 2
+        if size > len(self.ended):
+            self.ended = np.concatenate([self.ended, np.zeros(size - len(self.ended), np.int64)])
+        self.ended += np.bincount(lengths, minlength=size)
 
     def total(self) -> int:
         return int(self.lengths[: self.count].sum())
@@ -344,24 +382,23 @@ class _Episodes:
 def _expected_remaining(ended: np.ndarray, ages: np.ndarray, limit: float) -> tuple[float, np.ndarray]:
     """(expected length of a new episode, expected further steps of each running one).
 
-    ``ended``: lengths of the ended episodes; ``ages``: steps taken so far by the
-    running ones (censored lengths). The survival curve is the Kaplan-Meier
+    ``ended[k]``: how many episodes ended after k steps; ``ages``: steps taken so
+    far by the running ones (censored lengths). The survival curve is the Kaplan-Meier
     estimate; the mean of the ended lengths alone runs short, since the short
     episodes end first (starting episodes by it stepped up to 50% more than n).
     Beyond the longest length seen, survivors are assumed to go on to twice it
     (capped by the limit). Before any episode ends: the limit, or 100 steps.
     """
-    if len(ended) == 0:
+    steps = np.flatnonzero(ended)
+    if len(steps) == 0:
         cap = limit if np.isfinite(limit) else 100.0
         return cap, np.maximum(cap - ages, 1.0)
-    ended = np.sort(ended.astype(np.float64))
+    times, deaths = steps.astype(np.float64), ended[steps]
     ages = ages.astype(np.float64)
     sorted_ages = np.sort(ages)
-    times, deaths = np.unique(ended, return_counts=True)
-    at_risk = (len(ended) - np.searchsorted(ended, times, side="left")) + (
-        len(ages) - np.searchsorted(sorted_ages, times, side="left")
-    )
-    longest = max(ended[-1], sorted_ages[-1] if len(ages) else 0.0)
+    ended_since = np.cumsum(ended[::-1])[::-1]  # episodes that ended after k steps or more
+    at_risk = ended_since[steps] + (len(ages) - np.searchsorted(sorted_ages, times, side="left"))
+    longest = max(times[-1], sorted_ages[-1] if len(ages) else 0.0)
     tail_end = max(min(2.0 * longest, limit), longest)
     edges = np.concatenate([[0.0], times, [tail_end]])
     survival = np.concatenate([[1.0], np.cumprod(1.0 - deaths / at_risk)])  # on [edges[i], edges[i+1])
@@ -401,43 +438,57 @@ def collect(
     rng = np.random.default_rng(seed)
     if not sim.fast:
         return _collect_env(sim, n, seed, rng, policy, max_episode_steps)
-    env = sim.make_env(seed)
+    with sim.seeded_env(seed) as env:
+        return _collect_batched(sim, env, n, n_parallel, rng, policy, sim.step_limit(max_episode_steps))
+
+
+def _collect_batched(
+    sim: _Simulator,
+    env: Any,
+    n: int,
+    n_parallel: int,
+    rng: np.random.Generator,
+    policy: IndexPolicy | None,
+    limit: float,
+) -> Transitions:
+    """collect() on the batched path: ``n_parallel`` episodes in lockstep, as documented there."""
     physics, task_obj = env.physics, env.task
     n_actions = len(sim.actions)
-    limit = sim.step_limit(max_episode_steps)
     slots = min(n_parallel, n)
     batch = sim.new_batch(slots)
-    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
     episodes = _Episodes(n)
     slot_episode = np.full(slots, -1, np.int64)
+    # Each live slot's paper state: the last step's next state (reading it back from
+    # the simulations would compute the same numbers again).
+    slot_state = np.empty((slots, physics.STATE_SIZE))
     chunks: list[tuple[np.ndarray, ...]] = []
-    ended: list[int] = []
     # Control steps the next pass may take in one C call (random actions only,
     # see _collect_steps); it changes the speed, never the data.
     plan = 1
     stepped = ends = 0  # passes' steps, and the steps that ended an episode unforeseen
     while True:  # one lockstep of every live episode per pass, or several in one call
-        free = np.flatnonzero(slot_episode < 0)
-        running = episodes.lengths[slot_episode[slot_episode >= 0]]
-        ended_lengths = np.asarray(ended)
-        n_start = _episodes_to_start(len(free), episodes.total(), n, ended_lengths, running, limit)
+        busy = slot_episode >= 0
+        free = np.flatnonzero(~busy)
+        n_start = _episodes_to_start(
+            len(free), episodes.total(), n, episodes.ended, episodes.lengths[slot_episode[busy]], limit
+        )
         if n_start:
             starts = free[:n_start]
-            sim.start_episodes(batch, starts, env)
-            for slot in starts:
-                slot_episode[slot] = episodes.start()
+            slot_state[starts] = sim.start_episodes(batch, starts, env)
+            slot_episode[starts] = episodes.start(n_start)
         live = np.flatnonzero(slot_episode >= 0)
         if len(live) == 0:
             break
         ep = slot_episode[live]
-        states = physics.states_from(qpos[live], qvel[live])
-        if policy is None and plan > 1 and episodes.lengths[ep].all():
-            quiet = _quiet_steps(plan, ep, episodes, n, limit, len(free) - n_start, ended_lengths)
+        states = slot_state[live]
+        lengths = episodes.lengths[ep]
+        if policy is None and plan > 1 and lengths.all():
+            quiet = _quiet_steps(plan, ep, episodes, n, limit, len(free) - n_start)
             if quiet > 1:
                 taken = _collect_steps(sim, task_obj, batch, live, ep, states, quiet, rng, episodes, n, limit, chunks)
                 if taken is not None:
-                    steps, last, done, surprise = taken
-                    ended.extend(episodes.lengths[ep[last]].tolist())
+                    steps, last, done, surprise, slot_state[live] = taken
+                    episodes.end(ep[last])
                     slot_episode[live[done]] = -1
                     stepped, ends = stepped + steps, ends + surprise
                     plan = _plan(stepped, ends)
@@ -447,11 +498,12 @@ def collect(
         else:
             actions = _check_indices(policy(states), len(live), n_actions)
         controls = task_obj.controls(sim.actions[actions], task_obj.random)
-        next_states, diverged = sim.advance(batch, live, controls, episodes.lengths[ep] == 0)
+        next_states, diverged = sim.advance(batch, live, controls, lengths == 0)
         rewards = np.asarray(task_obj.batch_reward(next_states), np.float64)
         absorbing = np.asarray(task_obj.batch_absorbing(next_states), bool)
-        episodes.lengths[ep] += 1
-        timeout = episodes.lengths[ep] >= limit
+        lengths += 1
+        episodes.lengths[ep] = lengths
+        timeout = lengths >= limit
         # dm_control: the time limit gives discount 1 even in a failure state;
         # a diverged step ends with discount 0, reward 0, the last finite state.
         absorbing = (absorbing & ~timeout) | diverged
@@ -460,7 +512,8 @@ def collect(
             rewards[diverged] = 0.0
         last = absorbing | timeout
         chunks.append((ep, states, actions, rewards, next_states, absorbing, last))
-        ended.extend(episodes.lengths[ep[last]].tolist())
+        slot_state[live] = next_states
+        episodes.end(ep[last])
         done = last | episodes.covered(ep)
         slot_episode[live[done]] = -1
         stepped, ends = stepped + 1, ends + bool(absorbing.any())
@@ -491,9 +544,7 @@ def _steps_to_cover(ep: np.ndarray, episodes: _Episodes, n: int) -> np.ndarray:
     return -((behind - n) // np.cumsum(live)[ep])
 
 
-def _quiet_steps(
-    most: int, ep: np.ndarray, episodes: _Episodes, n: int, limit: float, n_free: int, ended: np.ndarray
-) -> int:
+def _quiet_steps(most: int, ep: np.ndarray, episodes: _Episodes, n: int, limit: float, n_free: int) -> int:
     """Control steps (at most ``most``) the live episodes ``ep`` take before a foreseen event.
 
     Foreseen are the events that do not depend on the states: an episode
@@ -508,7 +559,7 @@ def _quiet_steps(
     if n_free:
         total = episodes.total()
         for j in range(1, steps):
-            if _episodes_to_start(n_free, total + j * len(ep), n, ended, lengths + j, limit):
+            if _episodes_to_start(n_free, total + j * len(ep), n, episodes.ended, lengths + j, limit):
                 return j
     return max(steps, 1)
 
@@ -526,7 +577,7 @@ def _collect_steps(
     n: int,
     limit: float,
     chunks: list[tuple[np.ndarray, ...]],
-) -> tuple[int, np.ndarray, np.ndarray, bool] | None:
+) -> tuple[int, np.ndarray, np.ndarray, bool, np.ndarray] | None:
     """Up to ``steps`` random-action control steps of the live episodes in one call.
 
     Records exactly what as many lockstep passes would: the actions of each
@@ -536,7 +587,8 @@ def _collect_steps(
     to that step, as if the later steps had never been drawn. The schedule's
     starts are the caller's to foresee (:func:`_quiet_steps`). Appends the
     steps taken to ``chunks`` and returns (steps taken, which live episodes
-    ended and which are done in the last one, whether an absorbing end came),
+    ended and which are done in the last one, whether an absorbing end came,
+    their paper states after it),
     or None when MuJoCo warned: then nothing is taken and the pass steps once,
     where a diverged step is handled.
     """
@@ -585,11 +637,13 @@ def _collect_steps(
         )
     )
     episodes.lengths[ep] += taken
-    return taken, last[taken - 1], done[taken - 1], bool(absorbing[taken - 1].any())
+    return taken, last[taken - 1], done[taken - 1], bool(absorbing[taken - 1].any()), next_states[taken - 1]
 
 
 def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, running: np.ndarray, limit: int) -> int:
     """How many new episodes ``collect`` starts now (at most ``n_free``).
+
+    ``ended``, ``running``: as :func:`_expected_remaining` takes them.
 
     Start an episode only when the live ones are not expected to supply the
     transitions still missing: starting all slots at once would cut long
@@ -602,6 +656,8 @@ def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, runni
     stepped 51%. A few episodes run at least while transitions are missing, so
     that the threads have work at once; none start once n are recorded.
     """
+    if n_free == 0 or total >= n:
+        return 0
     expected, remaining = _expected_remaining(ended, running, limit)
     supply = total + remaining.sum()
     n_live, n_start = len(running), 0
@@ -792,25 +848,22 @@ def evaluate(
     limit = sim.step_limit(max_episode_steps)
     if not np.isfinite(limit):
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
-    env = sim.make_env(seed)
-    physics, task_obj = env.physics, env.task
-    batch = sim.new_batch(n_episodes)
-    ids = np.arange(n_episodes)
-    sim.start_episodes(batch, ids, env)
-    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
-    returns = np.zeros(n_episodes)
-    lengths = np.zeros(n_episodes, np.int64)
-    live = ids
-    while len(live):
-        states = physics.states_from(qpos[live], qvel[live])
-        values = _check_values(policy(states), len(live), sim)
-        controls = task_obj.controls(values, task_obj.random)
-        next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
-        rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
-        returns[live] += rewards
-        lengths[live] += 1
-        ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
-        live = live[~ended]
+    with sim.seeded_env(seed) as env:
+        task_obj = env.task
+        batch = sim.new_batch(n_episodes)
+        live = np.arange(n_episodes)
+        states = sim.start_episodes(batch, live, env)
+        returns = np.zeros(n_episodes)
+        lengths = np.zeros(n_episodes, np.int64)
+        while len(live):
+            values = _check_values(policy(states), len(live), sim)
+            controls = task_obj.controls(values, task_obj.random)
+            next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
+            rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
+            returns[live] += rewards
+            lengths[live] += 1
+            ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
+            live, states = live[~ended], next_states[~ended]
     return returns, lengths
 
 

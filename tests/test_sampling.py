@@ -119,6 +119,27 @@ def test_deterministic_and_independent_of_threads():
     assert not np.array_equal(a.states, c.states)
 
 
+def test_a_policy_that_collects_does_not_disturb_the_collection():
+    # collect() and evaluate() reuse one environment per task, reseeded; a policy that
+    # itself collects or evaluates on the same task must get its own.
+    def push(states):  # falls within a few dozen steps: new episodes start between calls
+        return np.zeros(len(states), np.int64)
+
+    def nosy(states):
+        sampling.collect("cartpole", "balance", 50, seed=99)
+        sampling.evaluate("cartpole", "balance", lambda s: np.zeros((len(s), 1)), 2, seed=98, max_episode_steps=5)
+        return push(states)
+
+    plain = sampling.collect("cartpole", "balance", 400, seed=5, policy=push, n_parallel=8)
+    assert plain.last.sum() > 8
+    nested = sampling.collect("cartpole", "balance", 400, seed=5, policy=nosy, n_parallel=8)
+    for name in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
+        np.testing.assert_array_equal(getattr(nested, name), getattr(plain, name))
+    # The reseeded environment starts where a new one would.
+    random = sampling.collect("cartpole", "balance", 300, seed=5)
+    replay("cartpole", "balance", random, seed=5)
+
+
 def test_closed_loop_policy_balances_longer_than_random():
     def lean(states):  # push the cart under the falling pole
         return np.where(states[:, 2] + 0.5 * states[:, 3] > 0, 2, 0)
@@ -316,18 +337,19 @@ def test_expected_lengths_count_running_episodes_as_censored():
     """Kaplan-Meier by hand: one episode ended at 90, seven still run at age 90. S = 7/8 on
     [90, 180) (survivors assumed to go on to twice the longest seen), so a new episode is
     expected to last 90 + 90 * 7/8 = 168.75 steps, and each survivor 90 more; the mean of
-    the ended lengths alone would say 90."""
-    expected, remaining = sampling._expected_remaining(np.array([90]), np.full(7, 90), limit=100_000.0)
+    the ended lengths alone would say 90. Ended lengths come as a histogram (how many
+    ended after k steps)."""
+    expected, remaining = sampling._expected_remaining(np.bincount([90]), np.full(7, 90), limit=100_000.0)
     assert expected == pytest.approx(168.75)
     np.testing.assert_allclose(remaining, 90.0)
     # Running ages come back in their own order; the limit caps the tail.
-    expected, remaining = sampling._expected_remaining(np.array([10, 30]), np.array([20, 0]), limit=40.0)
+    expected, remaining = sampling._expected_remaining(np.bincount([10, 30]), np.array([20, 0]), limit=40.0)
     # S: 1 on [0, 10), 2/3 on [10, 30) (at risk at 10: ended 10, 30 and age 20), 0 from 30 on
     # (at risk at 30: the ended 30 alone); the tail [30, 40) adds nothing.
     assert expected == pytest.approx(10 + 20 * 2 / 3)
     np.testing.assert_allclose(remaining, [(20 * 2 / 3 - 10 * 2 / 3) / (2 / 3), 10 + 20 * 2 / 3])
     # Before any episode ends: the limit.
-    assert sampling._expected_remaining(np.array([], np.int64), np.array([3]), 50.0)[0] == 50.0
+    assert sampling._expected_remaining(np.zeros(8, np.int64), np.array([3]), 50.0)[0] == 50.0
 
 
 def test_transitions_save_and_load_round_trip(tmp_path):
@@ -430,6 +452,6 @@ def test_steps_to_cover_counts_the_live_episodes_before_each():
     # episode 1 holds 5 + 3 + j and episode 2 holds 5 + 3 + 2 + 2j transitions.
     episodes = sampling._Episodes(20)
     for length in (5, 3, 2):
-        episodes.lengths[episodes.start()] = length
+        episodes.lengths[episodes.start(1)] = length
     np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 20), [12, 5])
     np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 21), [13, 6])

@@ -237,8 +237,12 @@ class Physics(common.StatePhysics):
 
     def joint_address(self, joint: str) -> tuple[int, int]:
         """(qpos address, dof address) of a joint."""
-        joint_id = self.model.name2id(joint, "joint")
-        return int(self.model.jnt_qposadr[joint_id]), int(self.model.jnt_dofadr[joint_id])
+        # Looked up once: name2id costs ~20 us, and states_from runs every step.
+        addresses = self.__dict__.setdefault("_joint_addresses", {})
+        if joint not in addresses:
+            joint_id = self.model.name2id(joint, "joint")
+            addresses[joint] = int(self.model.jnt_qposadr[joint_id]), int(self.model.jnt_dofadr[joint_id])
+        return addresses[joint]
 
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         qpos, qvel = np.atleast_2d(np.asarray(qpos, np.float64)), np.atleast_2d(np.asarray(qvel, np.float64))
