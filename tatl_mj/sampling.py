@@ -659,15 +659,11 @@ def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, runni
     if n_free == 0 or total >= n:
         return 0
     expected, remaining = _expected_remaining(ended, running, limit)
-    supply = total + remaining.sum()
-    n_live, n_start = len(running), 0
-    for _ in range(n_free):
-        if total >= n or (supply >= n and n_live >= _MIN_LIVE):
-            break
-        supply += expected
-        n_live += 1
-        n_start += 1
-    return n_start
+    # Starting k more: supply after k additions of ``expected`` (added one at a time,
+    # as cumsum does) and k more live; the first k at which both suffice.
+    supply = np.cumsum(np.concatenate([[total + remaining.sum()], np.full(n_free, expected)]))
+    enough = (supply >= n) & (len(running) + np.arange(n_free + 1) >= _MIN_LIVE)
+    return int(np.argmax(enough)) if enough.any() else n_free
 
 
 def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:

@@ -254,11 +254,14 @@ class Physics(common.StatePhysics):
         r20 = 2.0 * (x * z - w * y) / norm2
         r21 = 2.0 * (y * z + w * x) / norm2
         r22 = 1.0 - 2.0 * (x * x + y * y) / norm2
-        roll = np.arcsin(np.clip(r21, -1.0, 1.0))
+        # minimum/maximum, not clip: the same numbers for a fifth of the call's overhead
+        roll = np.arcsin(np.minimum(np.maximum(r21, -1.0), 1.0))
         # d(r21)/dt = (omega_world x body_y) . z, with body-frame angular velocity.
         wx, wz = qvel[:, root_v + 3], qvel[:, root_v + 5]
         roll_rate = (r22 * wx - r20 * wz) / np.sqrt(np.maximum(1.0 - r21 * r21, 1e-300))
-        return np.stack([qpos[:, steer_q], qvel[:, steer_v], roll, roll_rate], axis=1)
+        out = np.empty((len(qpos), 4))
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = qpos[:, steer_q], qvel[:, steer_v], roll, roll_rate
+        return out
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Puts the bicycle at the origin heading +x, both tyres on the floor, rolling without slip.
