@@ -659,9 +659,12 @@ def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, runni
     if n_free == 0 or total >= n:
         return 0
     expected, remaining = _expected_remaining(ended, running, limit)
+    supply_now = total + remaining.sum()
+    if supply_now >= n and len(running) >= _MIN_LIVE:  # the usual answer, cheaply
+        return 0
     # Starting k more: supply after k additions of ``expected`` (added one at a time,
     # as cumsum does) and k more live; the first k at which both suffice.
-    supply = np.cumsum(np.concatenate([[total + remaining.sum()], np.full(n_free, expected)]))
+    supply = np.cumsum(np.concatenate([[supply_now], np.full(n_free, expected)]))
     enough = (supply >= n) & (len(running) + np.arange(n_free + 1) >= _MIN_LIVE)
     return int(np.argmax(enough)) if enough.any() else n_free
 
