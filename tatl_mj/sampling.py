@@ -212,8 +212,7 @@ class _Simulator:
         this step, right after a reset.
         """
         self.bound(batch, "ctrl")[ids] = controls
-        warnings = batch.warning[:, :, _WARNING_NUMBER]
-        before = warnings.sum(axis=1)  # counts only grow: a new warning changes the sum
+        before = _warning_totals(batch)
         diverged = np.zeros(len(ids), bool)
         if self.legacy_first and first.any():
             for k in np.flatnonzero(first):
@@ -226,7 +225,7 @@ class _Simulator:
         else:
             batch.step(ids, nstep=self.n_sub)
         # Any new MuJoCo warning is a PhysicsError in dm_control.
-        diverged |= (warnings.sum(axis=1) != before)[ids]
+        diverged |= (_warning_totals(batch) != before)[ids]
         states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
@@ -243,12 +242,11 @@ class _Simulator:
         Bit-identical to K calls of ``advance``.
         """
         k, n = controls.shape[:2]
-        warnings = batch.warning[:, :, _WARNING_NUMBER]
-        before, rows = warnings[ids].copy(), batch.state[ids].copy()
+        before, rows = _warning_totals(batch), batch.state[ids].copy()
         # The control of a control step is held over its n_sub substeps, as dm_control does.
         per_substep = np.repeat(controls.transpose(1, 0, 2), self.n_sub, axis=1)
         record = batch.rollout(k * self.n_sub, control=per_substep, record=("qpos", "qvel", _INTEGRATION), ids=ids)
-        if (warnings[ids] != before).any():
+        if (_warning_totals(batch) != before)[ids].any():
             batch.state[ids] = rows
             return None
         ends = slice(self.n_sub - 1, None, self.n_sub)  # the last substep of each control step
@@ -274,6 +272,12 @@ class _Simulator:
         mujoco.mj_step2(self.model, physics.data.ptr)
         mujoco.mj_getState(self.model, physics.data.ptr, row, _INTEGRATION)
         return bool(any(w.number for w in physics.data.ptr.warning))
+
+
+def _warning_totals(batch: mujoco.batch.Batch) -> np.ndarray:
+    """Each simulation's count of MuJoCo warnings so far: counts only grow, so a new one
+    (a PhysicsError in dm_control) changes the total."""
+    return batch.warning[:, :, _WARNING_NUMBER].sum(axis=1)
 
 
 @functools.lru_cache(maxsize=16)
@@ -359,13 +363,10 @@ class _Episodes:
     def end(self, episodes: np.ndarray) -> None:
         if len(episodes) == 0:
             return
-        lengths = self.lengths[episodes]
-        size = len(self.ended)
-        while lengths.max() >= size:
-            size *= 2
-        if size > len(self.ended):
-            self.ended = np.concatenate([self.ended, np.zeros(size - len(self.ended), np.int64)])
-        self.ended += np.bincount(lengths, minlength=size)
+        counts = np.bincount(self.lengths[episodes], minlength=len(self.ended))
+        if len(counts) > len(self.ended):
+            self.ended = np.concatenate([self.ended, np.zeros(len(counts) - len(self.ended), np.int64)])
+        self.ended += counts
 
     def total(self) -> int:
         return int(self.lengths[: self.count].sum())

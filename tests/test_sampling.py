@@ -140,6 +140,18 @@ def test_a_policy_that_collects_does_not_disturb_the_collection():
     replay("cartpole", "balance", random, seed=5)
 
 
+def test_bound_views_do_not_keep_batches_alive():
+    # Every collect() makes its own batch; the simulator's cache of bound views
+    # must not hold them (or their memory) after the call.
+    import gc
+
+    sim = sampling._simulator("cartpole", "balance", None, 2)
+    for _ in range(3):
+        sampling.collect("cartpole", "balance", 200, seed=1)
+    gc.collect()
+    assert list(sim._views.keys()) in ([], [sim._batch])
+
+
 def test_closed_loop_policy_balances_longer_than_random():
     def lean(states):  # push the cart under the falling pole
         return np.where(states[:, 2] + 0.5 * states[:, 3] > 0, 2, 0)
