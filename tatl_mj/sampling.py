@@ -28,20 +28,23 @@ does.
 order, so the data are what a sequential loop would collect; it starts
 episodes only as fast as they are expected to be needed, so that long
 (time-limited) episodes are not cut short and thrown away. With random
-actions (which do not depend on the states) it steps several control steps
-in one ``Batch.rollout`` call, until the first step in which an episode ends,
-and winds the simulations and random streams back to that step: the same data
-as one lockstep per call, with Python's cost per call spread over many steps.
+actions, each episode draws its actions, and the noise its controls carry,
+from its own blocks of random numbers (:class:`_EpisodeDraws`), so the data
+depend on the seed alone; the live episodes then take several control steps
+in one ``Batch.rollout`` call, and an episode that ends in it idles to the
+call's end (how many steps a call takes is a speed choice, :func:`_plan`).
 
 Tasks whose model changes during an episode (``rollout_compatible = False``,
 the time-varying pendulum) and tasks without physics (a known tabular model) are
 stepped through their environments behind the same functions.
 
 Seeding: ``collect``/``evaluate`` with ``seed`` draw start states from the
-successive resets of the task created with ``task_kwargs["random"] = seed``;
-the same task ``random`` then feeds ``Task.controls`` (rider noise), and a
-``np.random.default_rng(seed)`` draws the random policy's actions. With
-``n_parallel=1`` a collection is exactly a plain loop over that environment.
+successive resets of the task created with ``task_kwargs["random"] = seed``.
+``collect``'s random actions and their controls' noise are each episode's own
+draws from ``np.random.default_rng(seed)`` and generators derived from it;
+with a policy, and in ``evaluate``, the task's ``random`` feeds
+``Task.controls`` (rider noise) in lockstep order. Without control noise, a
+collection is exactly a plain loop over that environment with its actions.
 """
 
 from __future__ import annotations
@@ -71,9 +74,8 @@ ValuePolicy = Callable[[np.ndarray], np.ndarray]
 DEFAULT_PARALLEL = 256  # most episodes stepped together by collect()
 _MIN_LIVE = 8  # fewest, while more may be needed (a constant: results must not depend on threads)
 _MOST_STEPS = 64  # most control steps collect() takes in one call
-# Chance that such a call is cut short by an episode's end: 0.1-0.2 measured best on
-# the bicycle (falls at random), where cut calls waste physics and short ones Python.
-_CUT_CHANCE = 0.15
+_BLOCK = 256  # control steps of an episode's random actions drawn at a time (>= _MOST_STEPS)
+_PLAN_SCALE = 0.5  # a call's Python in steps of the live simulations, times 2 (see _plan)
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
 _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
 
@@ -229,23 +231,20 @@ class _Simulator:
         states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
-    def advance_steps(
-        self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray] | None:
+    def advance_steps(self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray) -> np.ndarray | None:
         """``len(controls)`` control steps of simulations ``ids`` in one C call.
 
         ``controls`` is (K, len(ids), nu), none of the steps an episode's first.
-        Returns the next paper states after each step (K, len(ids), d) and the
-        integration state rows after each step (len(ids), K, nstate), to rewind
-        to; or None, with the simulations put back where they were, when MuJoCo
-        warned (the caller then steps one at a time to find the diverging step).
+        Returns the next paper states after each step (K, len(ids), d); or None,
+        with the simulations put back where they were, when MuJoCo warned (the
+        caller then steps once, where a diverged step is handled).
         Bit-identical to K calls of ``advance``.
         """
         k, n = controls.shape[:2]
         before, rows = _warning_totals(batch), batch.state[ids].copy()
         # The control of a control step is held over its n_sub substeps, as dm_control does.
         per_substep = np.repeat(controls.transpose(1, 0, 2), self.n_sub, axis=1)
-        record = batch.rollout(k * self.n_sub, control=per_substep, record=("qpos", "qvel", _INTEGRATION), ids=ids)
+        record = batch.rollout(k * self.n_sub, control=per_substep, record=("qpos", "qvel"), ids=ids)
         if (_warning_totals(batch) != before)[ids].any():
             batch.state[ids] = rows
             return None
@@ -256,7 +255,7 @@ class _Simulator:
             return values.transpose(1, 0, 2).reshape(k * n, -1)
 
         states = self.physics.states_from(step_major("qpos"), step_major("qvel"))
-        return states.reshape(k, n, -1), record[_INTEGRATION][:, ends]
+        return states.reshape(k, n, -1)
 
     def _first_substep(self, row: np.ndarray) -> bool:
         """dm_control's first substep after a reset, on one state row in place.
@@ -425,112 +424,204 @@ def collect(
 
     Episodes start from the task's own start distribution (successive resets of
     the task seeded with ``seed``) and take actions uniform over ``ACTIONS``
-    indices from ``np.random.default_rng(seed)``, or ``policy(states)``
-    evaluated for all live episodes at once. An episode ends at an absorbing
-    state or after ``max_episode_steps`` (default: the task's time limit), which
-    is not absorbing. ``n_parallel`` episodes run in lockstep; the result
-    depends on ``seed`` and ``n_parallel`` only, not on ``n_threads``.
+    indices, or ``policy(states)`` evaluated for all live episodes at once. An
+    episode ends at an absorbing state or after ``max_episode_steps`` (default:
+    the task's time limit), which is not absorbing. Up to ``n_parallel``
+    episodes run in lockstep.
+
+    Random actions, and the noise the task's controls draw with them (the
+    bicycle's rider), are each episode's own (:class:`_EpisodeDraws`): the
+    transitions depend on ``seed`` alone, not on ``n_parallel`` or ``n_threads``.
+    With a policy, the controls' noise comes from the task's random stream in
+    lockstep order, so the transitions also depend on ``n_parallel``.
     """
     n = _check_count("n_transitions", n_transitions, 1)
     n_parallel = _check_count("n_parallel", n_parallel, 1)
     if max_episode_steps is not None:
         _check_count("max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
-    rng = np.random.default_rng(seed)
     if not sim.fast:
-        return _collect_env(sim, n, seed, rng, policy, max_episode_steps)
+        return _collect_env(sim, n, seed, np.random.default_rng(seed), policy, max_episode_steps)
     with sim.seeded_env(seed) as env:
-        return _collect_batched(sim, env, n, n_parallel, rng, policy, sim.step_limit(max_episode_steps))
+        return _Collection(sim, env, n, n_parallel, sim.step_limit(max_episode_steps)).run(seed, policy)
 
 
-def _collect_batched(
-    sim: _Simulator,
-    env: Any,
-    n: int,
-    n_parallel: int,
-    rng: np.random.Generator,
-    policy: IndexPolicy | None,
-    limit: float,
-) -> Transitions:
-    """collect() on the batched path: ``n_parallel`` episodes in lockstep, as documented there."""
-    physics, task_obj = env.physics, env.task
-    n_actions = len(sim.actions)
-    slots = min(n_parallel, n)
-    batch = sim.new_batch(slots)
-    episodes = _Episodes(n)
-    slot_episode = np.full(slots, -1, np.int64)
-    # Each live slot's paper state: the last step's next state (reading it back from
-    # the simulations would compute the same numbers again).
-    slot_state = np.empty((slots, physics.STATE_SIZE))
-    chunks: list[tuple[np.ndarray, ...]] = []
-    # Control steps the next pass may take in one C call (random actions only,
-    # see _collect_steps); it changes the speed, never the data.
-    plan = 1
-    stepped = ends = 0  # passes' steps, and the steps that ended an episode unforeseen
-    while True:  # one lockstep of every live episode per pass, or several in one call
-        busy = slot_episode >= 0
-        free = np.flatnonzero(~busy)
-        n_start = _episodes_to_start(
-            len(free), episodes.total(), n, episodes.ended, episodes.lengths[slot_episode[busy]], limit
-        )
+class _EpisodeDraws:
+    """Each episode's random actions and the controls they give, noise included.
+
+    Episode e's first ``block`` steps come from two generators of the collection,
+    ``block`` steps per episode in start order: actions from
+    ``np.random.default_rng(seed)``, the controls' noise from its first spawned
+    child. Its later blocks j = 1, 2, ... come from ``default_rng([seed, e, j])``
+    (actions, then noise). So an episode's actions and noise depend on the seed
+    and its number only: not on which episodes run beside it, nor on how many
+    steps a C call takes, and an absorbing end cuts no call short.
+    """
+
+    def __init__(self, sim: _Simulator, task: Any, seed: int, slots: int, limit: float):
+        self.sim, self.task, self.seed = sim, task, seed
+        self.block = int(min(_BLOCK, np.ceil(limit)))
+        self.actions_rng = np.random.default_rng(seed)
+        self.noise_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        # Two blocks a slot, so that a call's steps may cross into the next one.
+        self.actions = np.zeros((slots, 2 * self.block), np.int64)
+        self.controls = np.zeros((slots, 2 * self.block, sim.model.nu))
+        self.base = np.zeros(slots, np.int64)  # each slot's episode step of column 0
+        self.drawn = np.zeros(slots, np.int64)  # columns filled
+        self.episode = np.zeros(slots, np.int64)
+
+    def _draw(self, random: np.random.Generator, actions: np.ndarray) -> np.ndarray:
+        controls = self.task.controls(self.sim.actions[actions.ravel()], random)
+        return controls.reshape(*actions.shape, -1)
+
+    def start(self, slots: np.ndarray, episodes: np.ndarray) -> None:
+        """Draws the first blocks of ``episodes`` (consecutive, in start order) into ``slots``."""
+        b = self.block
+        actions = self.actions_rng.integers(len(self.sim.actions), size=(len(slots), b))
+        self.actions[slots, :b] = actions
+        self.controls[slots, :b] = self._draw(self.noise_rng, actions)
+        self.base[slots], self.drawn[slots], self.episode[slots] = 0, b, episodes
+
+    def take(self, slots: np.ndarray, lengths: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Actions (k, m) and controls (k, m, nu) of the next ``k <= block`` steps of
+        the episodes in ``slots``, which have taken ``lengths`` steps."""
+        b = self.block
+        offset = lengths - self.base[slots]
+        spent = offset >= b  # the first block is behind them: move the second down
+        if spent.any():
+            s = slots[spent]
+            self.actions[s, :b], self.controls[s, :b] = self.actions[s, b:], self.controls[s, b:]
+            self.base[s] += b
+            self.drawn[s] -= b
+            offset[spent] -= b
+        for slot in slots[offset + k > self.drawn[slots]]:
+            column = self.drawn[slot]
+            random = np.random.default_rng([self.seed, self.episode[slot], (self.base[slot] + column) // b])
+            actions = random.integers(len(self.sim.actions), size=b)
+            self.actions[slot, column : column + b] = actions
+            self.controls[slot, column : column + b] = self._draw(random, actions)
+            self.drawn[slot] += b
+        rows, columns = slots[:, None], offset[:, None] + np.arange(k)
+        return self.actions[rows, columns].T, self.controls[rows, columns].transpose(1, 0, 2)
+
+
+class _Collection:
+    """collect() on the batched path: episodes in lockstep, as documented there."""
+
+    def __init__(self, sim: _Simulator, env: Any, n: int, n_parallel: int, limit: float):
+        self.sim, self.env, self.task, self.n, self.limit = sim, env, env.task, n, limit
+        slots = min(n_parallel, n)
+        self.batch = sim.new_batch(slots)
+        self.episodes = _Episodes(n)
+        self.slot_episode = np.full(slots, -1, np.int64)
+        # Each live slot's paper state: the last step's next state (reading it back from
+        # the simulations would compute the same numbers again).
+        self.slot_state = np.empty((slots, env.physics.STATE_SIZE))
+        self.chunks: list[tuple[np.ndarray, ...]] = []
+
+    def run(self, seed: int, policy: IndexPolicy | None) -> Transitions:
+        sim, task = self.sim, self.task
+        draws = _EpisodeDraws(sim, task, seed, len(self.slot_episode), self.limit) if policy is None else None
+        n_actions = len(sim.actions)
+        plan, stepped, ends = 1, 0, 0  # control steps the next call takes; live steps and ends so far
+        while True:
+            starts = self.start_episodes()
+            if draws is not None and len(starts):
+                draws.start(starts, self.slot_episode[starts])
+                if sim.legacy_first:  # the first steps replay the reset hooks, one step apart
+                    self.step(starts, *draws.take(starts, np.zeros(len(starts), np.int64), 1))
+            live = np.flatnonzero(self.slot_episode >= 0)
+            if len(live) == 0:
+                return _assemble(self.chunks, self.n)
+            if draws is None:
+                actions = _check_indices(policy(self.slot_state[live]), len(live), n_actions)[None]
+                self.step(live, actions, task.controls(sim.actions[actions[0]], task.random)[None])
+                continue
+            ep = self.slot_episode[live]
+            lengths = self.episodes.lengths[ep]
+            # Beyond this every live episode is over or not needed: stepping on is waste.
+            useful = np.minimum(np.ceil(self.limit - lengths), _steps_to_cover(ep, self.episodes, self.n)).max()
+            k = int(min(plan, useful, draws.block))
+            ended = self.step(live, *draws.take(live, lengths, k))
+            stepped, ends = stepped + k * len(live), ends + ended
+            plan = _plan(stepped, ends)
+
+    def start_episodes(self) -> np.ndarray:
+        """Starts as many episodes as the schedule asks for; returns their slots."""
+        episodes, slot_episode = self.episodes, self.slot_episode
+        free = np.flatnonzero(slot_episode < 0)
+        running = episodes.lengths[slot_episode[slot_episode >= 0]]
+        n_start = _episodes_to_start(len(free), episodes.total(), self.n, episodes.ended, running, self.limit)
+        starts = free[:n_start]
         if n_start:
-            starts = free[:n_start]
-            slot_state[starts] = sim.start_episodes(batch, starts, env)
+            self.slot_state[starts] = self.sim.start_episodes(self.batch, starts, self.env)
             slot_episode[starts] = episodes.start(n_start)
-        live = np.flatnonzero(slot_episode >= 0)
-        if len(live) == 0:
-            break
-        ep = slot_episode[live]
-        states = slot_state[live]
-        lengths = episodes.lengths[ep]
-        if policy is None and plan > 1 and lengths.all():
-            quiet = _quiet_steps(plan, ep, episodes, n, limit, len(free) - n_start)
-            if quiet > 1:
-                taken = _collect_steps(sim, task_obj, batch, live, ep, states, quiet, rng, episodes, n, limit, chunks)
-                if taken is not None:
-                    steps, last, done, surprise, slot_state[live] = taken
-                    episodes.end(ep[last])
-                    slot_episode[live[done]] = -1
-                    stepped, ends = stepped + steps, ends + surprise
-                    plan = _plan(stepped, ends)
-                    continue
-        if policy is None:
-            actions = rng.integers(n_actions, size=len(live))
+        return starts
+
+    def step(self, ids: np.ndarray, actions: np.ndarray, controls: np.ndarray) -> int:
+        """``len(actions)`` control steps of the episodes in slots ``ids`` (sorted), recorded.
+
+        An episode's steps end with its first absorbing or time-limit step; a
+        simulation whose episode ended steps on idle to the end of the call.
+        Returns how many episodes ended.
+        """
+        sim, task, episodes = self.sim, self.task, self.episodes
+        k, m = actions.shape
+        ep = self.slot_episode[ids]
+        states, lengths = self.slot_state[ids], episodes.lengths[ep]
+        stepped = sim.advance_steps(self.batch, ids, controls) if k > 1 else None
+        if stepped is None:  # one step (or MuJoCo warned: step once, where divergence is handled)
+            k, actions = 1, actions[:1]
+            next_state, diverged = sim.advance(self.batch, ids, controls[0], lengths == 0)
+            next_states = next_state[None]
         else:
-            actions = _check_indices(policy(states), len(live), n_actions)
-        controls = task_obj.controls(sim.actions[actions], task_obj.random)
-        next_states, diverged = sim.advance(batch, live, controls, lengths == 0)
-        rewards = np.asarray(task_obj.batch_reward(next_states), np.float64)
-        absorbing = np.asarray(task_obj.batch_absorbing(next_states), bool)
-        lengths += 1
-        episodes.lengths[ep] = lengths
-        timeout = lengths >= limit
+            next_states, diverged = stepped, np.zeros(m, bool)
+        flat = next_states.reshape(k * m, -1)
+        rewards = np.asarray(task.batch_reward(flat), np.float64).reshape(k, m)
+        absorbing = np.asarray(task.batch_absorbing(flat), bool).reshape(k, m)
+        step = np.arange(1, k + 1)[:, None]
+        timeout = lengths + step >= self.limit
         # dm_control: the time limit gives discount 1 even in a failure state;
         # a diverged step ends with discount 0, reward 0, the last finite state.
-        absorbing = (absorbing & ~timeout) | diverged
+        absorbing &= ~timeout
         if diverged.any():
-            next_states[diverged] = states[diverged]
-            rewards[diverged] = 0.0
+            absorbing[0] |= diverged
+            next_states[0, diverged] = states[diverged]
+            rewards[0, diverged] = 0.0
         last = absorbing | timeout
-        chunks.append((ep, states, actions, rewards, next_states, absorbing, last))
-        slot_state[live] = next_states
-        episodes.end(ep[last])
-        done = last | episodes.covered(ep)
-        slot_episode[live[done]] = -1
-        stepped, ends = stepped + 1, ends + bool(absorbing.any())
-        plan = _plan(stepped, ends)
-    return _assemble(chunks, n)
+        ended = last.any(axis=0)
+        taken = np.where(ended, np.argmax(last, axis=0) + 1, k)  # steps of each episode's own
+        keep = step <= taken
+        before = np.concatenate([states[None], next_states[:-1]])
+        self.chunks.append(
+            (
+                np.broadcast_to(ep, (k, m))[keep],
+                before[keep],
+                actions[keep],
+                rewards[keep],
+                next_states[keep],
+                absorbing[keep],
+                last[keep],
+            )
+        )
+        episodes.lengths[ep] = lengths + taken
+        self.slot_state[ids] = next_states[taken - 1, np.arange(m)]
+        episodes.end(ep[ended])
+        done = ended | episodes.covered(ep)
+        self.slot_episode[ids[done]] = -1
+        return int(ended.sum())
 
 
 def _plan(stepped: int, ends: int) -> int:
-    """Control steps to try in the next call, from the passes so far.
+    """Control steps to take in the next call, from the live steps and episode ends so far.
 
-    ``ends`` of the ``stepped`` steps had an unforeseen (absorbing) end, which
-    cuts a call short and throws its later steps away; the plan is the length
-    whose chance of being cut is about ``_CUT_CHANCE`` (one step each while
-    episodes end every step, as random cart-pole's do).
+    A call of K steps leaves an episode that ends in it idle for the rest
+    (on average (K - 1) / 2 steps at a constant end rate h per step), while each
+    call costs Python about as much as ``_PLAN_SCALE / 2`` steps of the live
+    simulations; the K that minimises h (K - 1) / 2 + _PLAN_SCALE / (2 K) is
+    sqrt(_PLAN_SCALE / h). It sets the speed only, never the data.
     """
-    return int(min(_MOST_STEPS, max(1, _CUT_CHANCE * (stepped + 1) / (ends + 1))))
+    return int(min(_MOST_STEPS, max(1.0, np.sqrt(_PLAN_SCALE * stepped / (ends + 1)))))
 
 
 def _steps_to_cover(ep: np.ndarray, episodes: _Episodes, n: int) -> np.ndarray:
@@ -543,102 +634,6 @@ def _steps_to_cover(ep: np.ndarray, episodes: _Episodes, n: int) -> np.ndarray:
     live[ep] = 1
     behind = np.cumsum(episodes.lengths[: episodes.count])[ep]
     return -((behind - n) // np.cumsum(live)[ep])
-
-
-def _quiet_steps(most: int, ep: np.ndarray, episodes: _Episodes, n: int, limit: float, n_free: int) -> int:
-    """Control steps (at most ``most``) the live episodes ``ep`` take before a foreseen event.
-
-    Foreseen are the events that do not depend on the states: an episode
-    reaching the time limit or covering the first ``n`` transitions (in the
-    last of the steps), and the schedule starting new episodes (between steps).
-    Absorbing ends are not foreseen.
-    """
-    lengths = episodes.lengths[ep]
-    steps = min(most, int(_steps_to_cover(ep, episodes, n).min()))
-    if np.isfinite(limit):
-        steps = min(steps, int(np.ceil(limit - lengths.max())))
-    if n_free:
-        total = episodes.total()
-        for j in range(1, steps):
-            if _episodes_to_start(n_free, total + j * len(ep), n, episodes.ended, lengths + j, limit):
-                return j
-    return max(steps, 1)
-
-
-def _collect_steps(
-    sim: _Simulator,
-    task: Any,
-    batch: mujoco.batch.Batch,
-    live: np.ndarray,
-    ep: np.ndarray,
-    states: np.ndarray,
-    steps: int,
-    rng: np.random.Generator,
-    episodes: _Episodes,
-    n: int,
-    limit: float,
-    chunks: list[tuple[np.ndarray, ...]],
-) -> tuple[int, np.ndarray, np.ndarray, bool, np.ndarray] | None:
-    """Up to ``steps`` random-action control steps of the live episodes in one call.
-
-    Records exactly what as many lockstep passes would: the actions of each
-    step are the rng's next draws for all live episodes, as a pass draws them,
-    and the call ends with the first step in which an episode ends or is no
-    longer needed; the simulations and both random streams are then wound back
-    to that step, as if the later steps had never been drawn. The schedule's
-    starts are the caller's to foresee (:func:`_quiet_steps`). Appends the
-    steps taken to ``chunks`` and returns (steps taken, which live episodes
-    ended and which are done in the last one, whether an absorbing end came,
-    their paper states after it),
-    or None when MuJoCo warned: then nothing is taken and the pass steps once,
-    where a diverged step is handled.
-    """
-    n_live = len(live)
-    rng_state, random_state = rng.bit_generator.state, task.random.get_state()
-
-    def draw(k: int) -> tuple[np.ndarray, np.ndarray]:
-        actions = rng.integers(len(sim.actions), size=(k, n_live))
-        return actions, task.controls(sim.actions[actions.ravel()], task.random).reshape(k, n_live, -1)
-
-    def rewind(k: int) -> None:
-        rng.bit_generator.state = rng_state
-        task.random.set_state(random_state)
-        if k:
-            draw(k)
-
-    actions, controls = draw(steps)
-    stepped = sim.advance_steps(batch, live, controls)
-    if stepped is None:
-        rewind(0)
-        return None
-    next_states, rows = stepped
-    flat = next_states.reshape(steps * n_live, -1)
-    rewards = np.asarray(task.batch_reward(flat), np.float64).reshape(steps, n_live)
-    absorbing = np.asarray(task.batch_absorbing(flat), bool).reshape(steps, n_live)
-    step = np.arange(1, steps + 1)[:, None]
-    timeout = episodes.lengths[ep] + step >= limit
-    # dm_control: the time limit gives discount 1 even in a failure state.
-    absorbing &= ~timeout
-    last = absorbing | timeout
-    done = last | (step >= _steps_to_cover(ep, episodes, n))
-    taken = int(np.argmax(done.any(axis=1))) + 1 if done.any() else steps
-    if taken < steps:
-        batch.state[live] = rows[:, taken - 1]
-        rewind(taken)
-    before = np.concatenate([states[None], next_states[: taken - 1]])
-    chunks.append(
-        (
-            np.tile(ep, taken),
-            before.reshape(taken * n_live, -1),
-            actions[:taken].ravel(),
-            rewards[:taken].ravel(),
-            next_states[:taken].reshape(taken * n_live, -1),
-            absorbing[:taken].ravel(),
-            last[:taken].ravel(),
-        )
-    )
-    episodes.lengths[ep] += taken
-    return taken, last[taken - 1], done[taken - 1], bool(absorbing[taken - 1].any()), next_states[taken - 1]
 
 
 def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, running: np.ndarray, limit: int) -> int:

@@ -23,6 +23,14 @@ def assert_close(actual, desired, err_msg=""):
     np.testing.assert_allclose(actual, desired, rtol=0, atol=ATOL, err_msg=err_msg)
 
 
+FIELDS = ("states", "actions", "rewards", "next_states", "absorbing", "last")
+
+
+def assert_same_transitions(a, b):
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
 PHYSICS_TASKS = [t for t in suite.ALL_TASKS if t[0] != "gridworld"]
 BATCHED_TASKS = [t for t in PHYSICS_TASKS if sampling.is_batched(*t)]
 
@@ -58,21 +66,106 @@ def draws_noise(domain: str, task: str, task_kwargs=None) -> bool:
 
 @pytest.mark.parametrize("domain,task", suite.ALL_TASKS)
 def test_collect_is_the_environment_loop(domain, task):
-    # One episode at a time: bit-identical to the plain loop, noise included.
-    tr = sampling.collect(domain, task, 300, seed=5, n_parallel=1)
+    # One episode at a time: bit-identical to the plain loop. Rider noise is each
+    # episode's own in collect() (below), so it is silenced here.
+    kwargs = QUIET.get((domain, task))
+    tr = sampling.collect(domain, task, 300, seed=5, n_parallel=1, task_kwargs=kwargs)
     assert len(tr) == 300 and tr.last[-1]
-    replay(domain, task, tr, seed=5)
+    replay(domain, task, tr, seed=5, task_kwargs=kwargs)
 
 
 @pytest.mark.parametrize("domain,task", BATCHED_TASKS)
 def test_lockstep_collect_is_the_environment_loop(domain, task):
-    # Noise drawn by controls (the bicycle's rider) comes in another order when
-    # episodes run in lockstep (exact at n_parallel=1, above); silenced here,
-    # the task then draws none.
     kwargs = QUIET.get((domain, task))
     tr = sampling.collect(domain, task, 500, seed=11, n_parallel=13, n_threads=2, task_kwargs=kwargs)
     assert tr.last.sum() >= 2
     replay(domain, task, tr, seed=11, task_kwargs=kwargs)
+
+
+def test_rider_noise_is_each_episodes_own():
+    # The environment replays a noisy collection when each episode's controls are
+    # the ones _EpisodeDraws documents: its block of the collection's streams, in start order.
+    seed, n = 4, 700
+    tr = sampling.collect("bicycle", "balance", n, seed=seed)
+    assert tr.last.sum() >= 3
+    sim = sampling._simulator("bicycle", "balance", None, 2)
+    env = suite.load("bicycle", "balance", task_kwargs={"random": seed})
+    # The draws' own task: the environment's controls are replaced below.
+    task = suite.load("bicycle", "balance", task_kwargs={"random": seed}).task
+    draws = sampling._EpisodeDraws(sim, task, seed, 1, sim.step_limit(None))
+    slot, episode, steps = np.zeros(1, np.int64), 0, 0
+    rows = []
+
+    def episode_controls(values, random):
+        actions, controls = draws.take(slot, np.array([steps]), 1)
+        rows.append(actions[0, 0])
+        return controls[0]
+
+    env.task.controls = episode_controls
+    i = 0
+    while i < n:
+        draws.start(slot, np.array([episode]))
+        state = env.reset().observation["state"]
+        steps = 0
+        while i < n:
+            assert_close(tr.states[i], state, err_msg=f"state {i}")
+            timestep = env.step(suite.action_set("bicycle")[tr.actions[i]])
+            steps += 1
+            state = timestep.observation["state"]
+            assert_close(tr.next_states[i], state, err_msg=f"next state {i}")
+            i += 1
+            if timestep.last():
+                break
+        episode += 1
+    np.testing.assert_array_equal(rows, tr.actions)  # the actions are the episodes' draws too
+
+
+def test_an_episodes_draws_are_its_blocks():
+    # Known answer: episode e's first block is row e of default_rng(seed)'s draws,
+    # its block j after that default_rng([seed, e, j])'s. Mountain car's random
+    # episodes run to the time limit (~400 steps), past the first block.
+    seed, block = 3, sampling._BLOCK
+    tr = sampling.collect("mountain_car", "climb", 1200, seed=seed, n_parallel=2)
+    episodes = np.split(tr.actions, np.flatnonzero(tr.last)[:-1] + 1)
+    assert len(episodes) == 3 and block < len(episodes[0]) <= 2 * block
+    n_actions = len(suite.action_set("mountain_car"))
+    first = np.random.default_rng(seed).integers(n_actions, size=(3, block))
+    for e, actions in enumerate(episodes):
+        np.testing.assert_array_equal(actions[:block], first[e][: len(actions)])
+        later = np.random.default_rng([seed, e, 1]).integers(n_actions, size=block)
+        np.testing.assert_array_equal(actions[block:], later[: len(actions) - block])
+
+
+@pytest.mark.parametrize(
+    "domain,task,n,kwargs",
+    [
+        ("bicycle", "balance", 3000, {}),  # rider noise
+        ("mountain_car", "climb", 3000, {}),
+        ("mountain_car", "climb", 1500, {"max_episode_steps": 37}),
+        ("cartpole", "balance", 2000, {}),
+        ("pendulum", "swingup", 1000, {}),
+    ],
+)
+def test_random_collections_depend_on_the_seed_alone(domain, task, n, kwargs, monkeypatch):
+    # Not on how many episodes run together nor how many steps a call takes: the
+    # multi-step calls, the one-step passes and one episode at a time agree.
+    calls = []
+    real = sampling._Simulator.advance_steps
+
+    def counting(self, batch, ids, controls):
+        calls.append(controls.shape[:2])
+        return real(self, batch, ids, controls)
+
+    monkeypatch.setattr(sampling._Simulator, "advance_steps", counting)
+    many = sampling.collect(domain, task, n, seed=7, **kwargs)
+    assert calls and max(k for k, _ in calls) > 1  # the multi-step path ran
+    for parallel in (1, 5):
+        assert_same_transitions(many, sampling.collect(domain, task, n, seed=7, n_parallel=parallel, **kwargs))
+    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)  # one control step per pass
+    calls.clear()
+    one = sampling.collect(domain, task, n, seed=7, **kwargs)
+    assert not calls
+    assert_same_transitions(many, one)
 
 
 def test_quiet_tasks_draw_no_noise():
@@ -375,41 +468,6 @@ def test_transitions_save_and_load_round_trip(tmp_path):
 
 # --- Several control steps in one call (random actions) ------------------------------
 
-FIELDS = ("states", "actions", "rewards", "next_states", "absorbing", "last")
-
-
-def assert_same_transitions(a, b):
-    for name in FIELDS:
-        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-
-
-@pytest.mark.parametrize(
-    "domain,task,n,kwargs",
-    [
-        ("bicycle", "balance", 3000, {}),  # rider noise: both random streams wound back
-        ("mountain_car", "climb", 3000, {}),  # time-limit ends foreseen
-        ("mountain_car", "climb", 1500, {"max_episode_steps": 37, "n_parallel": 5}),
-        ("cartpole", "balance", 2000, {"n_parallel": 1}),
-        ("pendulum", "swingup", 1000, {}),
-    ],
-)
-def test_steps_in_one_call_are_the_lockstep_passes(domain, task, n, kwargs, monkeypatch):
-    calls = []
-    real = sampling._Simulator.advance_steps
-
-    def counting(self, batch, ids, controls):
-        calls.append(controls.shape[:2])
-        return real(self, batch, ids, controls)
-
-    monkeypatch.setattr(sampling._Simulator, "advance_steps", counting)
-    many = sampling.collect(domain, task, n, seed=7, **kwargs)
-    assert calls and max(k for k, _ in calls) > 1  # the multi-step path ran
-    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)  # one control step per pass
-    calls.clear()
-    one = sampling.collect(domain, task, n, seed=7, **kwargs)
-    assert not calls
-    assert_same_transitions(many, one)
-
 
 def test_steps_refused_by_mujoco_are_stepped_one_at_a_time(monkeypatch):
     # advance_steps gives up (MuJoCo warned) and puts the simulations back:
@@ -438,13 +496,13 @@ def test_advance_steps_gives_up_on_a_diverging_simulation():
     # Without the diverging one, 4 steps in one call are 4 single steps.
     one = sim.new_batch(1)
     one.state[0] = rows[0]
-    states, after = sim.advance_steps(one, ids[:1], np.zeros((4, 1, 1)))
+    states = sim.advance_steps(one, ids[:1], np.zeros((4, 1, 1)))
     single = sim.new_batch(1)
     single.state[0] = rows[0]
     for k in range(4):
         step, _ = sim.advance(single, ids[:1], np.zeros((1, 1)), np.array([False]))
         np.testing.assert_array_equal(states[k], step)
-        np.testing.assert_array_equal(after[0, k], single.state[0])
+    np.testing.assert_array_equal(one.state[0], single.state[0])
 
 
 @pytest.mark.parametrize("domain,task", BATCHED_TASKS)

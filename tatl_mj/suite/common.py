@@ -208,8 +208,10 @@ class StateTask(base.Task):
     - ``controls(action_values, random) -> (N, nu)``: the full ``ctrl`` vector for
       actions ``(N, action_dim)`` (adds e.g. servo set-points or rider noise);
       any noise is drawn row after row, so that one call on stacked rows equals
-      successive calls on their parts (the sampler steps many control steps in
-      one call when the actions do not depend on the states);
+      successive calls on their parts (the sampler draws a block of an
+      episode's steps in one call). ``random`` is the task's RandomState in the
+      environment and a Generator in the sampler: draw with methods both have
+      (``uniform``, ``normal``);
     - ``start_configurations(physics, n) -> (n, nq), (n, nv)``: where ``n``
       successive episodes start, drawn from ``self.random`` exactly as ``n``
       resets would draw them; ``initialize_episode`` is this with ``n = 1``,
@@ -255,7 +257,7 @@ class StateTask(base.Task):
     def batch_absorbing(self, states: np.ndarray) -> np.ndarray:
         return np.zeros(len(states), dtype=bool)
 
-    def controls(self, action_values: np.ndarray, random: np.random.RandomState) -> np.ndarray:
+    def controls(self, action_values: np.ndarray, random: np.random.RandomState | np.random.Generator) -> np.ndarray:
         return np.asarray(action_values, dtype=np.float64)
 
     def before_step(self, action: Any, physics: StatePhysics) -> None:
