@@ -32,7 +32,7 @@ actions, each episode draws its actions, and the noise its controls carry,
 from its own blocks of random numbers (:class:`_EpisodeDraws`), so the data
 depend on the seed alone; the live episodes then take several control steps
 in one ``Batch.rollout`` call, and an episode that ends in it idles to the
-call's end (how many steps a call takes is a speed choice, :func:`_plan`).
+call's end (how many steps a call takes is a speed choice, :func:`_call_length`).
 
 Tasks whose model changes during an episode (``rollout_compatible = False``,
 the time-varying pendulum) and tasks without physics (a known tabular model) are
@@ -52,6 +52,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import inspect
+import time
 import weakref
 from typing import Any, Callable
 
@@ -75,7 +76,6 @@ DEFAULT_PARALLEL = 256  # most episodes stepped together by collect()
 _MIN_LIVE = 8  # fewest, while more may be needed (a constant: results must not depend on threads)
 _MOST_STEPS = 64  # most control steps collect() takes in one call
 _BLOCK = 256  # control steps of an episode's random actions drawn at a time (>= _MOST_STEPS)
-_PLAN_SCALE = 0.5  # a call's Python in steps of the live simulations, times 2 (see _plan)
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
 _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
 
@@ -518,13 +518,17 @@ class _Collection:
         # the simulations would compute the same numbers again).
         self.slot_state = np.empty((slots, env.physics.STATE_SIZE))
         self.chunks: list[tuple[np.ndarray, ...]] = []
+        self.c_seconds = 0.0  # spent in MuJoCo's calls
 
     def run(self, seed: int, policy: IndexPolicy | None) -> Transitions:
         sim, task = self.sim, self.task
         draws = _EpisodeDraws(sim, task, seed, len(self.slot_episode), self.limit) if policy is None else None
         n_actions = len(sim.actions)
-        plan, stepped, ends = 1, 0, 0  # control steps the next call takes; live steps and ends so far
+        # What calls cost, to size them (_call_length): seconds outside the C calls,
+        # seconds in them, simulation steps in them, calls.
+        overhead = physics = sim_steps = calls = 0.0
         while True:
+            began, in_c = time.perf_counter(), self.c_seconds
             starts = self.start_episodes()
             if draws is not None and len(starts):
                 draws.start(starts, self.slot_episode[starts])
@@ -539,12 +543,14 @@ class _Collection:
                 continue
             ep = self.slot_episode[live]
             lengths = self.episodes.lengths[ep]
-            # Beyond this every live episode is over or not needed: stepping on is waste.
-            useful = np.minimum(np.ceil(self.limit - lengths), _steps_to_cover(ep, self.episodes, self.n)).max()
-            k = int(min(plan, useful, draws.block))
-            ended = self.step(live, *draws.take(live, lengths, k))
-            stepped, ends = stepped + k * len(live), ends + ended
-            plan = _plan(stepped, ends)
+            # Steps after which each live episode is over or no longer needed.
+            caps = np.minimum(np.ceil(self.limit - lengths), _steps_to_cover(ep, self.episodes, self.n))
+            call_cost = overhead / calls / (physics / sim_steps) if calls else float(len(live))
+            k = _call_length(self.episodes.ended, lengths, caps, call_cost, min(_MOST_STEPS, draws.block))
+            self.step(live, *draws.take(live, lengths, k))
+            in_c = self.c_seconds - in_c
+            overhead, physics = overhead + time.perf_counter() - began - in_c, physics + in_c
+            sim_steps, calls = sim_steps + k * len(live), calls + 1
 
     def start_episodes(self) -> np.ndarray:
         """Starts as many episodes as the schedule asks for; returns their slots."""
@@ -569,6 +575,7 @@ class _Collection:
         k, m = actions.shape
         ep = self.slot_episode[ids]
         states, lengths = self.slot_state[ids], episodes.lengths[ep]
+        began = time.perf_counter()
         stepped = sim.advance_steps(self.batch, ids, controls) if k > 1 else None
         if stepped is None:  # one step (or MuJoCo warned: step once, where divergence is handled)
             k, actions = 1, actions[:1]
@@ -576,6 +583,7 @@ class _Collection:
             next_states = next_state[None]
         else:
             next_states, diverged = stepped, np.zeros(m, bool)
+        self.c_seconds += time.perf_counter() - began
         flat = next_states.reshape(k * m, -1)
         rewards = np.asarray(task.batch_reward(flat), np.float64).reshape(k, m)
         absorbing = np.asarray(task.batch_absorbing(flat), bool).reshape(k, m)
@@ -612,16 +620,35 @@ class _Collection:
         return int(ended.sum())
 
 
-def _plan(stepped: int, ends: int) -> int:
-    """Control steps to take in the next call, from the live steps and episode ends so far.
+def _call_length(ended: np.ndarray, ages: np.ndarray, caps: np.ndarray, call_cost: float, most: int) -> int:
+    """Control steps for the next call: the most useful steps per cost (a speed choice only).
 
-    A call of K steps leaves an episode that ends in it idle for the rest
-    (on average (K - 1) / 2 steps at a constant end rate h per step), while each
-    call costs Python about as much as ``_PLAN_SCALE / 2`` steps of the live
-    simulations; the K that minimises h (K - 1) / 2 + _PLAN_SCALE / (2 K) is
-    sqrt(_PLAN_SCALE / h). It sets the speed only, never the data.
+    ``ended``, ``ages``: as :func:`_expected_remaining` takes them; ``caps``: steps
+    after which each live episode is over or not needed. A call of K steps costs
+    K steps of every live simulation plus ``call_cost`` (the Python around it, in
+    simulation steps); it is useful for the steps each episode takes before it
+    ends, which a Kaplan-Meier survival S estimates: an episode of age a takes
+    the call's step j + 1 with probability S(a + j) / S(a). No call reaches
+    further than the longest length seen, so the first ones, before any episode
+    ends, stay short.
     """
-    return int(min(_MOST_STEPS, max(1.0, np.sqrt(_PLAN_SCALE * stepped / (ends + 1)))))
+    m = len(ages)
+    seen = np.flatnonzero(ended)
+    most = int(min(most, max(1, seen[-1] if len(seen) else 0, ages.max()), caps.max()))
+    horizon = int(ages.max()) + most + 1
+    deaths = np.zeros(horizon)
+    deaths[: min(horizon, len(ended))] = ended[:horizon]
+    ended_since = np.cumsum(ended[::-1])[::-1]  # episodes that ended after t steps or more
+    reach = np.zeros(horizon)
+    reach[: min(horizon, len(ended))] = ended_since[:horizon]
+    times = np.arange(horizon)
+    at_risk = reach + (m - np.searchsorted(np.sort(ages), times, side="left"))
+    survival = np.cumprod(1.0 - deaths / np.maximum(at_risk, 1.0))  # S(t) = P(length > t)
+    area = np.concatenate([[0.0], np.cumsum(survival)])  # sum of S(u) for u < t
+    k = np.arange(1, most + 1)
+    steps = np.minimum(k[:, None], caps[None, :]).astype(np.int64)
+    useful = ((area[ages + steps] - area[ages]) / survival[ages]).sum(axis=1)
+    return int(np.argmax(useful / (k * m + call_cost))) + 1
 
 
 def _steps_to_cover(ep: np.ndarray, episodes: _Episodes, n: int) -> np.ndarray:

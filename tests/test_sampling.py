@@ -525,3 +525,20 @@ def test_steps_to_cover_counts_the_live_episodes_before_each():
         episodes.lengths[episodes.start(1)] = length
     np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 20), [12, 5])
     np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 21), [13, 6])
+
+
+def test_calls_reach_to_the_episodes_ends_and_no_further():
+    # Every ended episode was 10 steps long: a call is worth making until the live
+    # episodes end at step 10, never past it, and never past what is needed (caps).
+    ended = np.bincount(np.full(50, 10))
+    length = sampling._call_length
+    assert length(ended, np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 10
+    assert length(ended, np.full(20, 6), np.full(20, 100.0), 20.0, 64) == 4
+    assert length(ended, np.zeros(20, np.int64), np.full(20, 3.0), 20.0, 64) == 3
+    # Before any episode ends, no further than the oldest has gone (at least 1).
+    assert length(np.zeros(64, np.int64), np.full(20, 2), np.full(20, 100.0), 20.0, 64) == 2
+    assert length(np.zeros(64, np.int64), np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 1
+    # Half end at 2 steps and half at 40: long calls idle half the simulations, but
+    # a call costing nothing extra is then worth one step at a time (no idling).
+    mixed = np.bincount(np.r_[np.full(50, 2), np.full(50, 40)])
+    assert length(mixed, np.ones(20, np.int64), np.full(20, 100.0), 0.0, 64) == 1
