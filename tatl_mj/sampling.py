@@ -270,7 +270,8 @@ class _Simulator:
             return True
         mujoco.mj_step2(self.model, physics.data.ptr)
         mujoco.mj_getState(self.model, physics.data.ptr, row, _INTEGRATION)
-        return bool(any(w.number for w in physics.data.ptr.warning))
+        # The counts as one array (iterating the warning structs costs ~0.3 ms).
+        return bool(physics.data.ptr.warning.number.any())
 
 
 def _warning_totals(batch: mujoco.batch.Batch) -> np.ndarray:

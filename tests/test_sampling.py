@@ -288,6 +288,21 @@ def test_step_from_divergence_returns_the_start_state():
     assert got[0, 2] == 0.0 and np.all(np.isfinite(got))
 
 
+def test_a_diverging_first_substep_is_reported():
+    # The bicycle (implicitfast) replays dm_control's first substep after a reset
+    # through its hooks; a warning there must end the episode like any other.
+    states = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 2e10, 0.0, 0.0]])
+    sim = sampling._simulator("bicycle", "balance", None, 2)
+    assert sim.legacy_first
+    batch = sim.new_batch(2)
+    sim.place(batch, np.arange(2), *sim.physics.qpos_qvel_from(states))
+    assert not sim._first_substep(batch.state[0])
+    assert sim._first_substep(batch.state[1])
+    got = sampling.step_from("bicycle", "balance", states, np.array([1, 1]))
+    np.testing.assert_array_equal(got[1], states[1])
+    assert np.all(np.isfinite(got)) and not np.array_equal(got[0], states[0])
+
+
 @pytest.mark.parametrize("domain,task", [("cartpole", "balance"), ("pendulum", "swingup_timevarying")])
 def test_evaluate_matches_environment_returns(domain, task):
     gain = np.array([[1.0, 1.0, 20.0, 3.0]]) if domain == "cartpole" else np.array([[-2.0, -1.0]])
