@@ -234,7 +234,8 @@ class _Simulator:
     def advance_steps(self, batch: mujoco.batch.Batch, ids: np.ndarray, controls: np.ndarray) -> np.ndarray | None:
         """``len(controls)`` control steps of simulations ``ids`` in one C call.
 
-        ``controls`` is (K, len(ids), nu), none of the steps an episode's first.
+        ``controls`` is (K, len(ids), nu); with ``legacy_first``, none of the
+        steps may be an episode's first (see :meth:`advance`).
         Returns the next paper states after each step (K, len(ids), d); or None,
         with the simulations put back where they were, when MuJoCo warned (the
         caller then steps once, where a diverged step is handled).
