@@ -11,8 +11,8 @@ import pytest
 
 from tatl_mj import sampling, suite
 
-# Rider noise draws from the task's random in a different order when episodes
-# run in lockstep; with zero noise the draws do not change the dynamics.
+# Rider noise: collect() draws it from each episode's own blocks, the environment
+# from its task's random; with zero noise nothing is drawn and both agree.
 QUIET = {("bicycle", "balance"): {"cg_noise": 0.0}}
 # The issue asks for bitwise or 1e-12: everything is bitwise, the bicycle's
 # computed paper state (trig, a Newton solve, a 3x3 solve) included.
@@ -134,6 +134,18 @@ def test_an_episodes_draws_are_its_blocks():
         np.testing.assert_array_equal(actions[:block], first[e][: len(actions)])
         later = np.random.default_rng([seed, e, 1]).integers(n_actions, size=block)
         np.testing.assert_array_equal(actions[block:], later[: len(actions) - block])
+
+
+@pytest.mark.parametrize("domain,task", [("bicycle", "balance"), ("cartpole", "balance"), ("pendulum", "swingup")])
+def test_a_smaller_random_collection_is_the_head_of_a_larger_one(domain, task):
+    # Episodes depend on the seed and their number alone, so budgets nest.
+    big = sampling.collect(domain, task, 2500, seed=6)
+    small = sampling.collect(domain, task, 900, seed=6)
+    for name in FIELDS:
+        expected = getattr(big, name)[:900].copy()
+        if name == "last":
+            expected[-1] = True  # the collected segment ends there
+        np.testing.assert_array_equal(getattr(small, name), expected, err_msg=name)
 
 
 @pytest.mark.parametrize(
