@@ -538,6 +538,8 @@ class _Collection:
                     self.step(starts, *draws.take(starts, np.zeros(len(starts), np.int64), 1))
             live = np.flatnonzero(self.slot_episode >= 0)
             if len(live) == 0:
+                if len(starts):  # all of them ended in their first step: the schedule may start more
+                    continue
                 return _assemble(self.chunks, self.n)
             if draws is None:
                 actions = _check_indices(policy(self.slot_state[live]), len(live), n_actions)[None]

@@ -215,6 +215,17 @@ def test_episodes_are_contiguous_and_limited():
     assert tr.absorbing.any() and (~tr.absorbing[ends]).any()
 
 
+@pytest.mark.parametrize("domain,task", [("bicycle", "balance"), ("cartpole", "balance")])
+def test_one_step_episodes_fill_the_collection(domain, task):
+    # Every episode ends in its first step (the bicycle's is stepped apart, through
+    # the reset hooks): the collection still holds n, each from the next reset.
+    tr = sampling.collect(domain, task, 600, seed=2, max_episode_steps=1)
+    assert len(tr) == 600 and tr.last.all()
+    env = suite.load(domain, task, task_kwargs={"random": 2})
+    starts = np.array([env.reset().observation["state"] for _ in range(600)])
+    np.testing.assert_array_equal(tr.states, starts)
+
+
 def test_deterministic_and_independent_of_threads():
     a = sampling.collect("cartpole", "balance", 3000, seed=3, n_threads=1)
     b = sampling.collect("cartpole", "balance", 3000, seed=3, n_threads=2)
