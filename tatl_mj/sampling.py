@@ -381,6 +381,21 @@ class _Episodes:
         return np.cumsum(self.lengths[: self.count])[episodes] >= self.n
 
 
+def _survival(ended: np.ndarray, ages: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Kaplan-Meier estimate of P(length > t) at each of ``times`` (increasing step
+    counts that include every length in ``ended`` up to the last of them).
+
+    ``ended``, ``ages``: as :func:`_expected_remaining` takes them. At t, the episodes
+    at risk are those that ended after t steps or more and those running at age t or more.
+    """
+    inside = times < len(ended)
+    at = np.minimum(times, len(ended) - 1)
+    deaths = np.where(inside, ended[at], 0)
+    ended_since = np.cumsum(ended[::-1])[::-1]  # episodes that ended after t steps or more
+    at_risk = np.where(inside, ended_since[at], 0) + (len(ages) - np.searchsorted(np.sort(ages), times, side="left"))
+    return np.cumprod(1.0 - deaths / np.maximum(at_risk, 1.0))
+
+
 def _expected_remaining(ended: np.ndarray, ages: np.ndarray, limit: float) -> tuple[float, np.ndarray]:
     """(expected length of a new episode, expected further steps of each running one).
 
@@ -395,15 +410,11 @@ def _expected_remaining(ended: np.ndarray, ages: np.ndarray, limit: float) -> tu
     if len(steps) == 0:
         cap = limit if np.isfinite(limit) else 100.0
         return cap, np.maximum(cap - ages, 1.0)
-    times, deaths = steps.astype(np.float64), ended[steps]
+    survival = np.concatenate([[1.0], _survival(ended, ages, steps)])  # on [edges[i], edges[i+1])
     ages = ages.astype(np.float64)
-    sorted_ages = np.sort(ages)
-    ended_since = np.cumsum(ended[::-1])[::-1]  # episodes that ended after k steps or more
-    at_risk = ended_since[steps] + (len(ages) - np.searchsorted(sorted_ages, times, side="left"))
-    longest = max(times[-1], sorted_ages[-1] if len(ages) else 0.0)
+    longest = float(max(steps[-1], ages.max() if len(ages) else 0.0))
     tail_end = max(min(2.0 * longest, limit), longest)
-    edges = np.concatenate([[0.0], times, [tail_end]])
-    survival = np.concatenate([[1.0], np.cumprod(1.0 - deaths / at_risk)])  # on [edges[i], edges[i+1])
+    edges = np.concatenate([[0.0], steps, [tail_end]])
     area = np.concatenate([[0.0], np.cumsum(survival * np.diff(edges))])  # integral of S up to edges[i]
     k = np.searchsorted(edges, ages, side="right") - 1
     area_to_age = area[k] + survival[k] * (ages - edges[k])
@@ -443,7 +454,7 @@ def collect(
         _check_count("max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
     if not sim.fast:
-        return _collect_env(sim, n, seed, np.random.default_rng(seed), policy, max_episode_steps)
+        return _collect_env(sim, n, seed, policy, max_episode_steps)
     with sim.seeded_env(seed) as env:
         return _Collection(sim, env, n, n_parallel, sim.step_limit(max_episode_steps)).run(seed, policy)
 
@@ -639,15 +650,7 @@ def _call_length(ended: np.ndarray, ages: np.ndarray, caps: np.ndarray, call_cos
     m = len(ages)
     seen = np.flatnonzero(ended)
     most = int(min(most, max(1, seen[-1] if len(seen) else 0, ages.max()), caps.max()))
-    horizon = int(ages.max()) + most + 1
-    deaths = np.zeros(horizon)
-    deaths[: min(horizon, len(ended))] = ended[:horizon]
-    ended_since = np.cumsum(ended[::-1])[::-1]  # episodes that ended after t steps or more
-    reach = np.zeros(horizon)
-    reach[: min(horizon, len(ended))] = ended_since[:horizon]
-    times = np.arange(horizon)
-    at_risk = reach + (m - np.searchsorted(np.sort(ages), times, side="left"))
-    survival = np.cumprod(1.0 - deaths / np.maximum(at_risk, 1.0))  # S(t) = P(length > t)
+    survival = _survival(ended, ages, np.arange(int(ages.max()) + most + 1))  # S(t) = P(length > t)
     area = np.concatenate([[0.0], np.cumsum(survival)])  # sum of S(u) for u < t
     k = np.arange(1, most + 1)
     steps = np.minimum(k[:, None], caps[None, :]).astype(np.int64)
@@ -710,12 +713,13 @@ def _collect_env(
     sim: _Simulator,
     n: int,
     seed: int,
-    rng: np.random.Generator,
     policy: IndexPolicy | None,
     max_episode_steps: int | None,
 ) -> Transitions:
-    """A plain loop over one environment (time-varying models, tasks without physics)."""
+    """A plain loop over one environment (time-varying models, tasks without physics);
+    random actions from ``np.random.default_rng(seed)``."""
     env = sim.make_env(seed)
+    rng = np.random.default_rng(seed)
     n_actions = len(sim.actions)
     state = _observed_state(env.reset())
     d = len(state)
