@@ -72,7 +72,9 @@ IndexPolicy = Callable[[np.ndarray], np.ndarray]
 ValuePolicy = Callable[[np.ndarray], np.ndarray]
 """``policy(states (N, d)) -> (N, action_dim)`` action values in actuator units."""
 
-DEFAULT_PARALLEL = 256  # most episodes stepped together by collect()
+DEFAULT_PARALLEL = 256  # most episodes collect() steps together with a policy
+_MOST_PARALLEL = 2048  # ... and with random actions, for the largest collections
+_TRANSITIONS_PER_SLOT = 64  # random actions: a parallel episode per this many transitions asked for
 _MIN_LIVE = 8  # fewest, while more may be needed (a constant: results must not depend on threads)
 _MOST_STEPS = 64  # most control steps collect() takes in one call
 _BLOCK = 256  # control steps of an episode's random actions drawn at a time (>= _MOST_STEPS)
@@ -431,7 +433,7 @@ def collect(
     task_kwargs: dict[str, Any] | None = None,
     max_episode_steps: int | None = None,
     n_threads: int = 2,
-    n_parallel: int = DEFAULT_PARALLEL,
+    n_parallel: int | None = None,
 ) -> Transitions:
     """Exactly ``n_transitions`` transitions of whole episodes, in episode order.
 
@@ -440,7 +442,9 @@ def collect(
     indices, or ``policy(states)`` evaluated for all live episodes at once. An
     episode ends at an absorbing state or after ``max_episode_steps`` (default:
     the task's time limit), which is not absorbing. Up to ``n_parallel``
-    episodes run in lockstep.
+    episodes run in lockstep; by default (None) ``DEFAULT_PARALLEL`` with a
+    policy, and with random actions one per 64 transitions asked for, from 256
+    to 2048 (:func:`_parallel`).
 
     Random actions, and the noise the task's controls draw with them (the
     bicycle's rider), are each episode's own (:class:`_EpisodeDraws`): the
@@ -449,7 +453,7 @@ def collect(
     lockstep order, so the transitions also depend on ``n_parallel``.
     """
     n = _check_count("n_transitions", n_transitions, 1)
-    n_parallel = _check_count("n_parallel", n_parallel, 1)
+    n_parallel = _parallel(n, policy) if n_parallel is None else _check_count("n_parallel", n_parallel, 1)
     if max_episode_steps is not None:
         _check_count("max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
@@ -457,6 +461,22 @@ def collect(
         return _collect_env(sim, n, seed, policy, max_episode_steps)
     with sim.seeded_env(seed) as env:
         return _Collection(sim, env, n, n_parallel, sim.step_limit(max_episode_steps)).run(seed, policy)
+
+
+def _parallel(n: int, policy: IndexPolicy | None) -> int:
+    """collect()'s default ``n_parallel`` for ``n`` transitions (a speed choice).
+
+    With random actions the data do not depend on it, and more simulations a
+    call spread the Python around each call over more steps, so that calls can
+    be shorter and fewer steps idle after an episode's end (cart-pole, 6x10^4
+    transitions: 9% of stepped substeps idle with 256, 6% with 937; 5-9% faster,
+    median of 10). Too many for ``n`` start a burst of episodes that ends in a long
+    tail, hence about one per 64 transitions. With a policy the controls' noise
+    follows the lockstep order, so its default stays fixed.
+    """
+    if policy is not None:
+        return DEFAULT_PARALLEL
+    return int(min(max(n // _TRANSITIONS_PER_SLOT, DEFAULT_PARALLEL), _MOST_PARALLEL))
 
 
 class _EpisodeDraws:
@@ -702,6 +722,8 @@ def _episodes_to_start(n_free: int, total: int, n: int, ended: np.ndarray, runni
 def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
     """The first ``n`` recorded transitions in (episode, step) order."""
     episode = np.concatenate([c[0] for c in chunks])
+    if episode.max() < 2**16:  # numpy's stable sort is a radix sort for 16-bit keys: 6x faster
+        episode = episode.astype(np.uint16)
     # Stable: steps of an episode were recorded in time order.
     order = np.argsort(episode, kind="stable")[:n]
     fields = [np.concatenate([c[i] for c in chunks])[order] for i in range(1, 7)]

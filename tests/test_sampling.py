@@ -180,6 +180,19 @@ def test_random_collections_depend_on_the_seed_alone(domain, task, n, kwargs, mo
     assert_same_transitions(many, one)
 
 
+def test_default_parallelism_grows_with_the_collection_and_leaves_the_data_alone(monkeypatch):
+    assert sampling._parallel(1_000, None) == sampling.DEFAULT_PARALLEL == 256
+    assert sampling._parallel(64 * 1_000, None) == 1_000
+    assert sampling._parallel(10**7, None) == 2_048
+    assert sampling._parallel(10**7, lambda s: np.zeros(len(s), np.int64)) == 256  # a policy's noise order stays
+    sizes = []
+    real = sampling._Simulator.new_batch
+    monkeypatch.setattr(sampling._Simulator, "new_batch", lambda self, nsim: sizes.append(nsim) or real(self, nsim))
+    default = sampling.collect("cartpole", "balance", 24_000, seed=3)
+    assert_same_transitions(default, sampling.collect("cartpole", "balance", 24_000, seed=3, n_parallel=256))
+    assert sizes == [375, 256]
+
+
 def test_quiet_tasks_draw_no_noise():
     # Guards the test above: QUIET names every task whose controls draw noise,
     # and with its kwargs the task draws none.
@@ -437,6 +450,9 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     assert summary["dm_control_vs_floor"] == pytest.approx(
         summary["dm_control_steps_per_s"] / summary["dm_control_floor_steps_per_s"]
     )
+    by_path = {r["path"]: r for r in records if r["kind"] == "steps"}
+    pairs = np.divide(by_path["sampler"]["each_steps_per_s"], by_path["rollout"]["each_steps_per_s"])
+    assert len(pairs) == 2 and summary["sampler_vs_rollout_paired"] == pytest.approx(pairs.mean())
     if has_gymnasium:
         peer = next(r for r in records if r.get("path") == "gymnasium")
         assert peer["env_id"] == "CartPole-v1" and peer["steps"] >= 100
