@@ -118,6 +118,10 @@ class _Simulator:
         # five a query or a collection's pass, as much as a small batch's physics).
         self._views: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
         self._spare_env: dm_env.Environment | None = None
+        # How long random-action episodes of this task lasted, by step limit: the
+        # ended-length histogram of every random collection so far, from which the
+        # next one starts its schedule and call lengths (speed only; see collect()).
+        self.random_lengths: dict[float, np.ndarray] = {}
         # dm_control's legacy step (every integrator but RK4) starts a step with
         # mj_step2 on the stages of the last forward pass; after a reset that is
         # Physics.after_reset's (by default run with actuation disabled, which
@@ -348,13 +352,14 @@ class _Episodes:
     """Lengths of started episodes, which ones the first n transitions still need, and
     how many ended after each number of steps."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int, ended_before: np.ndarray | None = None):
         self.n = n
         self.lengths = np.zeros(64, np.int64)
         self.count = 0
         # ended[k]: episodes that ended after k steps (the schedule's survival data;
-        # a histogram, since sorting every ended length each pass cost as much as the step)
-        self.ended = np.zeros(64, np.int64)
+        # a histogram, since sorting every ended length each pass cost as much as the step),
+        # from ``ended_before`` on: those of earlier collections of the same episodes.
+        self.ended = np.zeros(64, np.int64) if ended_before is None else ended_before.copy()
 
     def start(self, k: int) -> np.ndarray:
         """The numbers of ``k`` new episodes."""
@@ -451,6 +456,12 @@ def collect(
     transitions depend on ``seed`` alone, not on ``n_parallel`` or ``n_threads``.
     With a policy, the controls' noise comes from the task's random stream in
     lockstep order, so the transitions also depend on ``n_parallel``.
+
+    How many episodes to start and how many steps a call takes come from the
+    lengths of the episodes so far; random collections of a task also count
+    the episodes of its earlier random collections in this process (bicycle,
+    1.5x10^4 transitions: 13% of stepped substeps idle cold, 8% warm).
+    Neither changes the data.
     """
     n = _check_count("n_transitions", n_transitions, 1)
     n_parallel = _parallel(n, policy) if n_parallel is None else _check_count("n_parallel", n_parallel, 1)
@@ -459,8 +470,16 @@ def collect(
     sim = _simulator(domain, task, task_kwargs, n_threads)
     if not sim.fast:
         return _collect_env(sim, n, seed, policy, max_episode_steps)
+    limit = sim.step_limit(max_episode_steps)
     with sim.seeded_env(seed) as env:
-        return _Collection(sim, env, n, n_parallel, sim.step_limit(max_episode_steps)).run(seed, policy)
+        if policy is not None:
+            return _Collection(sim, env, n, n_parallel, limit).run(seed, policy)
+        # Random episodes of a task last as long in every collection: each one starts
+        # its estimates of their lengths from all the earlier ones (a speed choice only).
+        collection = _Collection(sim, env, n, n_parallel, limit, sim.random_lengths.get(limit))
+        transitions = collection.run(seed, None)
+        sim.random_lengths[limit] = collection.episodes.ended
+        return transitions
 
 
 def _parallel(n: int, policy: IndexPolicy | None) -> int:
@@ -541,11 +560,13 @@ class _EpisodeDraws:
 class _Collection:
     """collect() on the batched path: episodes in lockstep, as documented there."""
 
-    def __init__(self, sim: _Simulator, env: Any, n: int, n_parallel: int, limit: float):
+    def __init__(
+        self, sim: _Simulator, env: Any, n: int, n_parallel: int, limit: float, ended_before: np.ndarray | None = None
+    ):
         self.sim, self.env, self.task, self.n, self.limit = sim, env, env.task, n, limit
         slots = min(n_parallel, n)
         self.batch = sim.new_batch(slots)
-        self.episodes = _Episodes(n)
+        self.episodes = _Episodes(n, ended_before)
         self.slot_episode = np.full(slots, -1, np.int64)
         # Each live slot's paper state: the last step's next state (reading it back from
         # the simulations would compute the same numbers again).

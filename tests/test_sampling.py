@@ -193,6 +193,36 @@ def test_default_parallelism_grows_with_the_collection_and_leaves_the_data_alone
     assert sizes == [375, 256]
 
 
+def test_random_collections_start_from_the_lengths_of_earlier_ones(monkeypatch):
+    # A speed choice only: a warm start changes how the episodes are stepped, not the data.
+    sim = sampling._simulator("bicycle", "balance", None, 2)
+    limit = sim.step_limit(None)
+    sim.random_lengths.clear()
+    first_calls = []
+    real = sampling._Simulator.advance_steps
+
+    def recording(self, batch, ids, controls):
+        first_calls.append(len(controls))
+        return real(self, batch, ids, controls)
+
+    monkeypatch.setattr(sampling._Simulator, "advance_steps", recording)
+    cold = sampling.collect("bicycle", "balance", 3000, seed=4)
+    seen = sim.random_lengths[limit].copy()
+    # Every episode that fell within the collection is in the histogram (some beyond it too).
+    last = np.flatnonzero(cold.last)
+    fell = np.bincount(np.diff(np.r_[-1, last])[cold.absorbing[last]])
+    assert np.all(seen[: len(fell)] >= fell) and seen.sum() >= fell.sum() > 10
+    cold_first, first_calls[:] = first_calls[0], []
+    warm = sampling.collect("bicycle", "balance", 3000, seed=4)
+    assert_same_transitions(cold, warm)
+    assert cold_first == 2 and first_calls[0] > 2  # cold: the first call stays short; warm: it knows better
+    assert sim.random_lengths[limit].sum() > seen.sum()
+    upright = lambda s: np.where(s[:, 2] > 0, 2, 0)  # noqa: E731
+    total = sim.random_lengths[limit].sum()
+    sampling.collect("bicycle", "balance", 500, seed=4, policy=upright)  # a policy's lengths are its own
+    assert sim.random_lengths[limit].sum() == total
+
+
 def test_quiet_tasks_draw_no_noise():
     # Guards the test above: QUIET names every task whose controls draw noise,
     # and with its kwargs the task draws none.
