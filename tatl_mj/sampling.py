@@ -693,9 +693,12 @@ def _call_length(ended: np.ndarray, ages: np.ndarray, caps: np.ndarray, call_cos
     most = int(min(most, max(1, seen[-1] if len(seen) else 0, ages.max()), caps.max()))
     survival = _survival(ended, ages, np.arange(int(ages.max()) + most + 1))  # S(t) = P(length > t)
     area = np.concatenate([[0.0], np.cumsum(survival)])  # sum of S(u) for u < t
+    # Episodes of the same age and cap count alike: a few dozen kinds among up to 2,048.
+    kinds, counts = np.unique(ages * (most + 1) + np.minimum(caps, most).astype(np.int64), return_counts=True)
+    age, cap = np.divmod(kinds, most + 1)
     k = np.arange(1, most + 1)
-    steps = np.minimum(k[:, None], caps[None, :]).astype(np.int64)
-    useful = ((area[ages + steps] - area[ages]) / survival[ages]).sum(axis=1)
+    steps = np.minimum(k[:, None], cap[None, :])
+    useful = ((area[age + steps] - area[age]) / survival[age]) @ counts
     return int(np.argmax(useful / (k * m + call_cost))) + 1
 
 
