@@ -356,7 +356,7 @@ def measure_memory(n: int, threads: int) -> dict[str, Any]:
 
     tracemalloc.start()
     start = time.perf_counter()
-    tr = sampling.collect(*_reference(), n, seed=0, n_threads=threads, n_parallel=1024)
+    tr = sampling.collect(*_reference(), n, seed=0, n_threads=threads)  # the default parallelism
     elapsed = time.perf_counter() - start
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
