@@ -284,3 +284,37 @@ def test_models_are_compiled_once_and_never_shared():
     assert b.physics.model.body_mass[1] * 2.0 == a.physics.model.body_mass[1]
     c = suite.load("pendulum", "swingup", task_kwargs={"random": 0})
     assert c.physics.model.body_mass[1] == b.physics.model.body_mass[1]
+
+
+@pytest.mark.parametrize("domain,task", [("cartpole", "balance"), ("pendulum", "swingup")])
+def test_skipping_collision_and_constraints_changes_no_number(domain, task):
+    # These models disable MuJoCo's contact and constraint stages for speed. Nothing in
+    # them can touch or be constrained, so the dynamics must be the same bit for bit.
+    import copy
+
+    import mujoco
+    import mujoco.rollout
+
+    model = suite.load(domain, task, task_kwargs={"random": 0}).physics.model.ptr
+    skipped = mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
+    assert model.opt.disableflags & skipped == skipped
+    assert not model.jnt_limited.any() and not model.dof_frictionloss.any()
+    assert model.neq == 0 and model.ntendon == 0 and not (model.geom_contype | model.geom_conaffinity).any()
+    full = copy.copy(model)
+    full.opt.disableflags &= ~skipped
+    # Starts far from rest (fast spins, the cart far out) and bang-bang forces for 20 s.
+    rng = np.random.default_rng(0)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    data = mujoco.MjData(model)
+    starts = np.empty((16, mujoco.mj_stateSize(model, spec)))
+    for row in starts:
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = rng.uniform(-3, 3, model.nq)
+        data.qvel[:] = rng.uniform(-10, 10, model.nv)
+        mujoco.mj_getState(model, data, row, spec)
+    limit = model.actuator_ctrlrange[:, 1]
+    controls = rng.choice([-1.0, 1.0], size=(16, 2000, model.nu)) * limit
+    skipping, _ = mujoco.rollout.rollout(model, data, starts, controls)
+    computing, _ = mujoco.rollout.rollout(full, mujoco.MjData(full), starts, controls)
+    np.testing.assert_array_equal(skipping, computing)
+    assert np.abs(skipping[:, -1, 1 : 1 + model.nq]).max() > 10  # it went somewhere
