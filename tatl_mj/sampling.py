@@ -471,15 +471,15 @@ def collect(
     if not sim.fast:
         return _collect_env(sim, n, seed, policy, max_episode_steps)
     limit = sim.step_limit(max_episode_steps)
+    # Random episodes of a task last as long in every collection: each one starts its
+    # estimates of their lengths from all the earlier ones (a speed choice only).
+    earlier = sim.random_lengths.get(limit) if policy is None else None
     with sim.seeded_env(seed) as env:
-        if policy is not None:
-            return _Collection(sim, env, n, n_parallel, limit).run(seed, policy)
-        # Random episodes of a task last as long in every collection: each one starts
-        # its estimates of their lengths from all the earlier ones (a speed choice only).
-        collection = _Collection(sim, env, n, n_parallel, limit, sim.random_lengths.get(limit))
-        transitions = collection.run(seed, None)
+        collection = _Collection(sim, env, n, n_parallel, limit, earlier)
+        transitions = collection.run(seed, policy)
+    if policy is None:
         sim.random_lengths[limit] = collection.episodes.ended
-        return transitions
+    return transitions
 
 
 def _parallel(n: int, policy: IndexPolicy | None) -> int:

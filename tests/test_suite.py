@@ -4,9 +4,12 @@ seeding, rendering, argument checking and divergence handling.
 Episodes are kept short (``time_limit`` in task_kwargs) so the file stays fast.
 """
 
+import copy
 import inspect
 
 import dm_env
+import mujoco
+import mujoco.rollout
 import numpy as np
 import pytest
 from absl.testing import absltest
@@ -290,11 +293,6 @@ def test_models_are_compiled_once_and_never_shared():
 def test_skipping_collision_and_constraints_changes_no_number(domain, task):
     # These models disable MuJoCo's contact and constraint stages for speed. Nothing in
     # them can touch or be constrained, so the dynamics must be the same bit for bit.
-    import copy
-
-    import mujoco
-    import mujoco.rollout
-
     model = suite.load(domain, task, task_kwargs={"random": 0}).physics.model.ptr
     skipped = mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
     assert model.opt.disableflags & skipped == skipped
