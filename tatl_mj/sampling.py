@@ -517,12 +517,15 @@ class _EpisodeDraws:
         self.noise_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         # Two blocks a slot, so that a call's steps may cross into the next one.
         self.actions = np.zeros((slots, 2 * self.block), np.int64)
-        self.controls = np.zeros((slots, 2 * self.block, sim.model.nu))
+        # Noise-free controls are a function of the action: mapped only for the
+        # steps a call takes (cart-pole episodes take ~17 of a block's 256).
+        self.noisy = bool(task.control_noise)
+        self.controls = np.zeros((slots, 2 * self.block, sim.model.nu) if self.noisy else (0, 0, 0))
         self.base = np.zeros(slots, np.int64)  # each slot's episode step of column 0
         self.drawn = np.zeros(slots, np.int64)  # columns filled
         self.episode = np.zeros(slots, np.int64)
 
-    def _draw(self, random: np.random.Generator, actions: np.ndarray) -> np.ndarray:
+    def _draw(self, random: np.random.Generator | None, actions: np.ndarray) -> np.ndarray:
         controls = self.task.controls(self.sim.actions[actions.ravel()], random)
         return controls.reshape(*actions.shape, -1)
 
@@ -531,7 +534,8 @@ class _EpisodeDraws:
         b = self.block
         actions = self.actions_rng.integers(len(self.sim.actions), size=(len(slots), b))
         self.actions[slots, :b] = actions
-        self.controls[slots, :b] = self._draw(self.noise_rng, actions)
+        if self.noisy:
+            self.controls[slots, :b] = self._draw(self.noise_rng, actions)
         self.base[slots], self.drawn[slots], self.episode[slots] = 0, b, episodes
 
     def take(self, slots: np.ndarray, lengths: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -542,7 +546,9 @@ class _EpisodeDraws:
         spent = offset >= b  # the first block is behind them: move the second down
         if spent.any():
             s = slots[spent]
-            self.actions[s, :b], self.controls[s, :b] = self.actions[s, b:], self.controls[s, b:]
+            self.actions[s, :b] = self.actions[s, b:]
+            if self.noisy:
+                self.controls[s, :b] = self.controls[s, b:]
             self.base[s] += b
             self.drawn[s] -= b
             offset[spent] -= b
@@ -551,10 +557,14 @@ class _EpisodeDraws:
             random = np.random.default_rng([self.seed, self.episode[slot], (self.base[slot] + column) // b])
             actions = random.integers(len(self.sim.actions), size=b)
             self.actions[slot, column : column + b] = actions
-            self.controls[slot, column : column + b] = self._draw(random, actions)
+            if self.noisy:
+                self.controls[slot, column : column + b] = self._draw(random, actions)
             self.drawn[slot] += b
         rows, columns = slots[:, None], offset[:, None] + np.arange(k)
-        return self.actions[rows, columns].T, self.controls[rows, columns].transpose(1, 0, 2)
+        actions = self.actions[rows, columns].T
+        if not self.noisy:
+            return actions, self._draw(None, actions)
+        return actions, self.controls[rows, columns].transpose(1, 0, 2)
 
 
 class _Collection:
@@ -750,7 +760,8 @@ def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
         episode = episode.astype(np.uint16)
     # Stable: steps of an episode were recorded in time order.
     order = np.argsort(episode, kind="stable")[:n]
-    fields = [np.concatenate([c[i] for c in chunks])[order] for i in range(1, 7)]
+    # np.take: 4x faster than indexing with ``order`` on the (n, d) state fields.
+    fields = [np.take(np.concatenate([c[i] for c in chunks]), order, axis=0) for i in range(1, 7)]
     fields[5][-1] = True  # the collected segment ends here
     return Transitions(*fields)
 

@@ -230,6 +230,14 @@ def test_quiet_tasks_draw_no_noise():
     assert noisy == set(QUIET)
     assert not any(draws_noise(*t, task_kwargs=QUIET[t]) for t in QUIET)
 
+    # ... and each task says so: the sampler maps a quiet task's controls lazily, from
+    # the actions alone (with random=None).
+    def says(domain, task, task_kwargs=None):
+        return suite.load(domain, task, task_kwargs={**(task_kwargs or {}), "random": 0}).task.control_noise
+
+    assert {t for t in BATCHED_TASKS if says(*t)} == noisy
+    assert not any(says(*t, task_kwargs=QUIET[t]) for t in QUIET)
+
 
 def test_contact_model_keeps_its_warm_start():
     # The bicycle's tyre contacts use the constraint solver's warm start; a long

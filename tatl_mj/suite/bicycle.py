@@ -396,6 +396,7 @@ class Task(common.StateTask):
             raise ValueError(f"cg_noise must be in [0, {MAX_CG_NOISE}] m, got {cg_noise!r}")
         self.speed = speed
         self.cg_noise = cg_noise
+        self.control_noise = cg_noise > 0
         super().__init__(random=random)
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:

@@ -217,10 +217,13 @@ class StateTask(base.Task):
       resets would draw them; ``initialize_episode`` is this with ``n = 1``,
       and the sampler starts many episodes with one call;
     - ``rollout_compatible``: False when the model itself changes during an
-      episode (the time-varying pendulum), so the sampler must step the env.
+      episode (the time-varying pendulum), so the sampler must step the env;
+    - ``control_noise``: whether ``controls`` draws from ``random`` (the bicycle's
+      rider); without noise the sampler maps only the actions a step takes.
     """
 
     rollout_compatible: bool = True
+    control_noise: bool = False
 
     def start_configurations(self, physics: StatePhysics, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
