@@ -396,7 +396,6 @@ class Task(common.StateTask):
             raise ValueError(f"cg_noise must be in [0, {MAX_CG_NOISE}] m, got {cg_noise!r}")
         self.speed = speed
         self.cg_noise = cg_noise
-        self.control_noise = cg_noise > 0
         super().__init__(random=random)
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:
@@ -407,6 +406,10 @@ class Task(common.StateTask):
             maximum=[TORQUE_LIMIT],
             name="steer_torque",
         )
+
+    @property
+    def control_noise(self) -> bool:
+        return self.cg_noise > 0
 
     def controls(self, action_values: np.ndarray, random: Any) -> np.ndarray:
         torque = np.asarray(action_values, np.float64).reshape(-1, 1)

@@ -219,11 +219,16 @@ class StateTask(base.Task):
     - ``rollout_compatible``: False when the model itself changes during an
       episode (the time-varying pendulum), so the sampler must step the env;
     - ``control_noise``: whether ``controls`` draws from ``random`` (the bicycle's
-      rider); without noise the sampler maps only the actions a step takes.
+      rider). Without noise the sampler maps only the actions a call takes, with
+      ``random=None``; by default a task that overrides ``controls`` is taken to
+      draw noise, and may say otherwise.
     """
 
     rollout_compatible: bool = True
-    control_noise: bool = False
+
+    @property
+    def control_noise(self) -> bool:
+        return type(self).controls is not StateTask.controls
 
     def start_configurations(self, physics: StatePhysics, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
