@@ -238,6 +238,15 @@ def test_quiet_tasks_draw_no_noise():
     assert {t for t in BATCHED_TASKS if says(*t)} == noisy
     assert not any(says(*t, task_kwargs=QUIET[t]) for t in QUIET)
 
+    # A user's task that overrides controls is taken to draw noise unless it says not.
+    from tatl_mj.suite import cartpole
+
+    class Offset(cartpole.Task):
+        def controls(self, action_values, random):
+            return super().controls(action_values, random) + random.uniform(-1, 1, size=(len(action_values), 1))
+
+    assert Offset().control_noise and not cartpole.Task().control_noise
+
 
 def test_contact_model_keeps_its_warm_start():
     # The bicycle's tyre contacts use the constraint solver's warm start; a long
