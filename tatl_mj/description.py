@@ -47,6 +47,10 @@ class TaskDescription:
       action_low, action_high: (m,) actuator limits (None for a discrete task).
       state_low, state_high: (d,) the range ``set_state_vector`` accepts
         (-inf/inf where unlimited); a source simulator is queried inside it.
+      reset_low, reset_high: (d,) a finite box of states a simulator reset may place
+        the system in, where its behaviour matters: the ``reset`` data protocol and
+        model-based learners draw states uniformly from it. For a ``discrete`` task
+        with a known model, its cells are drawn instead. None where not declared.
       control_timestep: seconds per control step (None where steps have no duration).
       known_model: the task's exact tabular model when it has one (else None).
       transition_reward, transition_absorbing: the task's reward of a step
@@ -71,6 +75,8 @@ class TaskDescription:
     angle_origin: tuple[float, ...] | None = None
     state_low: np.ndarray | None = None
     state_high: np.ndarray | None = None
+    reset_low: np.ndarray | None = None
+    reset_high: np.ndarray | None = None
     known_model: KnownModel | None = None
     transition_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
     transition_absorbing: Callable[[np.ndarray], np.ndarray] | None = None
@@ -91,6 +97,14 @@ class TaskDescription:
         high = _floats(np.inf * np.ones(d) if self.state_high is None else self.state_high, "state_high", d)
         object.__setattr__(self, "state_low", low)
         object.__setattr__(self, "state_high", high)
+        if (self.reset_low is None) != (self.reset_high is None):
+            raise ValueError("TaskDescription.reset_low and reset_high are given together or not at all")
+        if self.reset_low is not None:
+            box_low, box_high = _floats(self.reset_low, "reset_low", d), _floats(self.reset_high, "reset_high", d)
+            if not (np.all(np.isfinite(box_low)) and np.all(np.isfinite(box_high)) and np.all(box_low < box_high)):
+                raise ValueError("TaskDescription.reset_low < reset_high must be finite in every entry")
+            object.__setattr__(self, "reset_low", box_low)
+            object.__setattr__(self, "reset_high", box_high)
         if not self.discrete:
             m = actions.shape[1]
             if self.action_low is None or self.action_high is None:
@@ -113,6 +127,15 @@ class TaskDescription:
     @property
     def action_dim(self) -> int:
         return self.action_values.shape[1]
+
+    def reset_states(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` states spread over the reset box (uniform; a known model's cells for a discrete task)."""
+        if self.discrete and self.known_model is not None:
+            cells = np.asarray(self.known_model()[3], dtype=np.float64)
+            return cells[rng.integers(len(cells), size=n)]
+        if self.reset_low is None or self.reset_high is None:
+            raise ValueError(f"{self.domain}/{self.task} declares no reset box (reset_low/reset_high)")
+        return rng.uniform(self.reset_low, self.reset_high, size=(n, self.state_dim))
 
     def clip_to_settable(self, states: np.ndarray) -> np.ndarray:
         """``states`` moved to the nearest state ``set_state_vector`` accepts."""

@@ -1023,3 +1023,21 @@ def policy_transitions(
                 break
             state = next_state
     return Transitions(**{k: np.asarray(v) for k, v in rows.items()})
+
+
+def start_states(
+    domain: str, task: str, n_episodes: int, seed: int, task_kwargs: dict[str, Any] | None = None
+) -> np.ndarray:
+    """(n, d) the start states of ``evaluate(domain, task, ..., n_episodes, seed)``'s episodes.
+
+    So a model can be scored from exactly the states a real rollout starts from
+    (Algorithm 2 compares U_M and U_Mhat from the same starts).
+    """
+    n = _check_count("n_episodes", n_episodes, 1)
+    sim = _simulator(domain, task, task_kwargs, 1)
+    if not sim.fast:
+        envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n)]
+        return np.stack([_observed_state(e.reset()) for e in envs])
+    with sim.seeded_env(seed) as env:
+        qpos, qvel = env.task.start_configurations(env.physics, n)
+        return sim.physics.states_from(qpos, qvel)

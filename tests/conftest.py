@@ -34,8 +34,11 @@ def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs):
     table = tomllib.loads((ROOT / "tasks" / f"{name}.toml").read_text())
     table["presets"] = {"tiny": TINY}
     table["source_learning"]["iterations"] = 5
-    for method in ("uma-tl", "rl"):
-        table["methods"][method]["iterations"] = 5
+    for settings in table["methods"].values():
+        if "iterations" in settings:
+            settings["iterations"] = 5
+    if "apprentice-fqi" in table["methods"]:
+        table["methods"]["apprentice-fqi"]["model_samples"] = 2000
     spec = spec_mod.parse_spec(table, f"{name}.toml")
     if target_kwargs:
         target = dataclasses.replace(spec.target, task_kwargs=target_kwargs)

@@ -55,21 +55,21 @@ def row(table: str, label: str) -> list[str]:
 
 def test_ratio_is_the_median_over_ta_tl_median():
     table = plot.table(summary({"ta-tl": [100, 100, None], "uma-tl": [1000, 1000, 100], "rl": [None, None, 1000]}))
-    assert row(table, "TA-TL (paper, Alg. 1)")[2:] == ["100 (100, 100, never; 2/3 reached)", "-"]
-    assert row(table, "UMA-TL")[2:] == ["1,000 (1,000, 1,000, 100; 3/3 reached)", "10.0x"]
+    assert row(table, "TA-TL (paper, Alg. 1)")[3:] == ["100 (100, 100, never; 2/3 reached)", "-"]
+    assert row(table, "UMA-TL")[3:] == ["1,000 (1,000, 1,000, 100; 3/3 reached)", "10.0x"]
     # RL's median seed never reached it: the ratio is at least the largest budget over TA-TL's.
-    assert row(table, "RL (no transfer)")[2:] == [
+    assert row(table, "RL (no transfer)")[3:] == [
         "never (never, never, 1,000; 1/3 reached)",
         "> 100x (median seed never reached it)",
     ]
-    assert row(table, "TA-TL (paper, Alg. 1)")[1] == "8.333 ± 2.4 (10)"
+    assert row(table, "TA-TL (paper, Alg. 1)")[2] == "8.333 ± 2.4 (10)"
     assert "Seed sets differ" not in table
 
 
 def test_ratio_when_ta_tl_never_reaches_the_threshold():
     table = plot.table(summary({"ta-tl": [None, None, 100], "uma-tl": [100, 100, 100], "rl": [None, None, None]}))
-    assert row(table, "UMA-TL")[3] == "TA-TL (paper, Alg. 1) (median seed) never reached it"
-    assert row(table, "RL (no transfer)")[3] == "neither (median seed) reached it"
+    assert row(table, "UMA-TL")[4] == "TA-TL (paper, Alg. 1) (median seed) never reached it"
+    assert row(table, "RL (no transfer)")[4] == "neither (median seed) reached it"
 
 
 def test_table_compares_only_shared_seeds_and_says_so():
@@ -77,8 +77,8 @@ def test_table_compares_only_shared_seeds_and_says_so():
     table = plot.table(
         summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []}, seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []})
     )
-    assert row(table, "UMA-TL")[2] == "never (never; 0/1 reached)"
-    assert row(table, "TA-TL (paper, Alg. 1)")[2] == "100 (100; 1/1 reached)"
+    assert row(table, "UMA-TL")[3] == "never (never; 0/1 reached)"
+    assert row(table, "TA-TL (paper, Alg. 1)")[3] == "100 (100; 1/1 reached)"
     assert (
         "Seed sets differ: compared over seeds [0], the ones every method finished; UMA-TL also "
         "finished [1] (not compared); RL (no transfer) finished no seed (not shown)."
@@ -90,7 +90,7 @@ def test_table_without_meaningful_threshold_judges_final_returns():
     exp["random_returns"] = [50.0]  # every method ends at 5, below random
     table = plot.table({"preset": "p", "seeds": [0], "methods": ["ta-tl", "uma-tl"], "experiments": {"toy": exp}})
     assert "No meaningful threshold" in table and "Judged on final returns" in table
-    assert row(table, "TA-TL (paper, Alg. 1)")[2:] == ["no meaningful threshold", "n/a"]
+    assert row(table, "TA-TL (paper, Alg. 1)")[3:] == ["no meaningful threshold", "n/a"]
 
 
 def test_axis_limits_clip_outliers_but_keep_references():

@@ -106,13 +106,20 @@ def test_settings_are_checked_in_the_constructor(make, message):
 def test_builtin_methods_return_batched_policies():
     problem, samples = _problem(), _samples()
     states = samples.states[:7]
-    tatl = TATL().learn(problem, samples)
+    tatl = TATL(actions="continuous").learn(problem, samples)
     assert isinstance(tatl, TATLPolicy) and tatl.samples_used == len(samples)
     # Target: the action acts with gain -2 on the velocity (0.1 * -2 * a_T with a_T = 2 a_S): the
     # apprentice finds B < 0, so TA-TL reverses the source's push.
     step = tatl.step(states)
     assert tatl.apprentice.B[1, 0] < 0
-    np.testing.assert_allclose(tatl(states), np.clip(-0.5 * step.a_T, -3, 3), atol=1e-6)
+    continuous = np.clip(-0.5 * step.a_T, -3, 3)
+    np.testing.assert_allclose(tatl(states), continuous, atol=1e-6)
+    # By default the same rule snaps to the target's discrete actions, the baselines' set.
+    values = problem.target.action_values[:, 0]
+    snapped = TATL().learn(problem, samples)(states)
+    assert set(snapped[:, 0]) <= set(values)
+    gaps = np.abs(tatl.step(states).action - values[None, :])  # the unsnapped rule's action
+    np.testing.assert_allclose(np.abs(snapped - tatl(states))[:, 0], gaps.min(axis=1), atol=1e-9)
     for method in (UMATL(gamma=0.9, iterations=10), RL(gamma=0.9, iterations=10)):
         actions = method.learn(problem, samples)(states)
         assert actions.shape == (7, 1) and set(actions[:, 0]) <= {-2.0, 0.0, 2.0}
@@ -130,9 +137,16 @@ def test_tatl_uses_algorithm_2_through_the_problem_hooks():
         return -20.0 if len(seen) < 2 else -10.5
 
     problem = _problem(target_return=lambda policy: -10.0, model_return=model_return)
-    policy = TATL(zeta=0.1, batch=50).learn(problem, _samples())
+    policy = TATL(zeta=0.1, gap="relative", batch=50).learn(problem, _samples())
     assert policy.samples_used == 100 and len(seen) == 2
-    assert problem.utility_gap(seen[0]) == pytest.approx(0.05)
+    assert problem.utility_gap(seen[0], kind="relative") == pytest.approx(0.05)
+    # The paper's rule is absolute and one-sided: U_M - U_Mhat = -10 + 10.5 = 0.5 > 0.1 at 100
+    # samples, so it goes on; a model that overrates the policy (U_Mhat = -9) stops it at once.
+    seen.clear()
+    assert TATL(zeta=0.1, batch=50).learn(problem, _samples()).samples_used == 400
+    assert problem.utility_gap(seen[0]) == pytest.approx(0.5)
+    optimistic = _problem(target_return=lambda policy: -10.0, model_return=lambda apprentice, policy: -9.0)
+    assert TATL(zeta=0.1, batch=50).learn(optimistic, _samples()).samples_used == 50
     # Without the hooks (or zeta None) the apprentice uses every sample.
     assert TATL(zeta=0.1, batch=50).learn(_problem(), _samples()).samples_used == 400
     assert TATL(zeta=None, batch=50).learn(problem, _samples()).samples_used == 400

@@ -7,11 +7,16 @@ tasks. Phase III (``run_method``): for each target-sample budget of the preset,
 a transfer method learns from the first ``n`` target transitions of that shared
 stream and its policy is evaluated on the target task.
 
-Target samples are counted the same way for every method: the number of target
-transitions the method consumed (a policy's ``samples_used`` where it reports one,
-e.g. TA-TL's apprentice under Algorithm 2; otherwise the whole budget). The target transitions used to learn the
-mapping are reported separately (``mapping_target_samples``), as the paper
-leaves them out of the comparison because TA-TL and UMA-TL share them.
+Target transitions are counted the same way for every method, per budget
+(``target_transitions``): the shared-stream samples it learned from (a policy's
+``samples_used`` where it reports one, e.g. TA-TL's apprentice under Algorithm 2;
+otherwise the whole budget; none for a method whose ``data`` protocol draws its
+own), plus every real-target transition the problem's hooks handed out or rolled
+out for it (Algorithm 2's rollouts of the projected source policy, reset-protocol
+and online data). Algorithm 2's rollouts start from their own start states, never
+the evaluation's. The target transitions used to learn the mapping are reported
+separately (``mapping_target_samples``), as the paper leaves them out of the
+comparison because TA-TL and UMA-TL share them.
 """
 
 from __future__ import annotations
@@ -234,18 +239,34 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 # --- phase III ----------------------------------------------------------------
 
 
-def _source_step(source: Side, description: TaskDescription, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """Algorithm 1's query of the source simulator, from states it can be put in.
-
-    A mapped target state can fall outside the region the source system is
-    defined on (beyond the mountain car's track): the query is made from the
-    nearest settable state (the task's description says which), and for a
-    source learned from a uniform box, from the nearest state inside that box,
-    where its Q-function was fitted.
-    """
+def _source_region(source: Side, description: TaskDescription, states: np.ndarray) -> np.ndarray:
+    """The nearest state the source can be queried at: settable (the task's
+    description says which; beyond the mountain car's track is not), and for a
+    source learned from a uniform box, inside that box, where its Q was fitted."""
     states = description.clip_to_settable(states)
     if source.data.sampling == "uniform":
         states = np.clip(states, source.data.state_low, source.data.state_high)
+    return states
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class QueriedMapping:
+    """A mapping whose chi_plus lands where the source is queried (``_source_region``), so a
+    method chooses the source's action at the very state its simulator steps from."""
+
+    inner: Any
+    region: Callable[[np.ndarray], np.ndarray]
+
+    def chi(self, source_states: np.ndarray) -> np.ndarray:
+        return self.inner.chi(source_states)
+
+    def chi_plus(self, target_states: np.ndarray) -> np.ndarray:
+        return self.region(self.inner.chi_plus(target_states))
+
+
+def _source_step(source: Side, description: TaskDescription, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """Algorithm 1's query of the source simulator, from the nearest state it can be queried at."""
+    states = _source_region(source, description, states)
     return sampling.step_from(source.domain, source.task, states, actions, task_kwargs=source.task_kwargs)
 
 
@@ -309,31 +330,55 @@ def _as_indices(policy: Callable, action_values: np.ndarray) -> Callable:
     return indices
 
 
+def _target_reward(target: Side) -> Callable | None:
+    """The target task's reward and end condition of a step, (s, a, s') -> (rewards, absorbing), or None.
+
+    The description's ``transition_reward`` where the reward depends on the step
+    (the grid world's bumps), else the task's ``batch_reward`` of the next state.
+    """
+    description = describe(target)
+    if description.transition_reward is not None and description.transition_absorbing is not None:
+        step_reward, absorbing = description.transition_reward, description.transition_absorbing
+    else:
+        task = getattr(suite.load(target.domain, target.task, task_kwargs=target.task_kwargs), "task", None)
+        if not hasattr(task, "batch_reward"):
+            return None
+        step_reward = lambda states, actions, next_states: task.batch_reward(next_states)  # noqa: E731
+        absorbing = task.batch_absorbing
+
+    def reward(states: np.ndarray, actions: np.ndarray, next_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            np.asarray(step_reward(states, actions, next_states), dtype=np.float64),
+            np.asarray(absorbing(next_states), dtype=bool),
+        )
+
+    return reward
+
+
+def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
+    """Seeds the start states of Algorithm 2's rollouts, real and modelled: never the evaluation's."""
+    return derive_seed(seed, spec.name, "algorithm2-starts")
+
+
 def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable | None:
     """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
 
-    The target task's own reward and end conditions are applied to the model's
-    predicted states (``batch_reward``, or the description's ``transition_reward``
-    for a task whose reward depends on the step), from the same kind of start
-    states as the target's episodes, for the evaluation protocol's steps. For a
-    task that takes indices, predictions are snapped to the nearest of its states
-    (its known model's cells). A task with neither reward gets None: Algorithm 2
-    then cannot run there.
+    The target task's own reward and end conditions (``_target_reward``) are
+    applied to the model's predicted states, from the start states of the real
+    rollouts of U_M (``_algorithm2_seed``), for the evaluation protocol's steps.
+    For a task that takes indices, predictions are snapped to the nearest of its
+    states (its known model's cells). A task with no such reward gets None:
+    Algorithm 2 then cannot run there.
     """
     target = spec.target
     description = describe(target)
-    kwargs = {**target.task_kwargs, "random": derive_seed(seed, spec.name, "algorithm2-starts")}
-    env = suite.load(target.domain, target.task, task_kwargs=kwargs)
-    task = getattr(env, "task", None)
-    if description.transition_reward is not None and description.transition_absorbing is not None:
-        step_reward, absorbing = description.transition_reward, description.transition_absorbing
-    elif hasattr(task, "batch_reward"):
-        step_reward = lambda states, actions, next_states: task.batch_reward(next_states)  # noqa: E731
-        absorbing = task.batch_absorbing
-    else:
+    reward = _target_reward(target)
+    if reward is None:
         return None
     cells = CellMap(description.known_model()[3]) if description.known_model is not None else None
-    starts = np.stack([env.reset().observation["state"] for _ in range(preset.evaluation_episodes)])
+    starts = sampling.start_states(
+        target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
+    )
     actions = description.action_values
 
     def snap(states: np.ndarray) -> np.ndarray:
@@ -354,8 +399,9 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
                 if not np.all(np.isfinite(next_states)):
                     return float("nan")  # the model diverged
                 next_states = snap(next_states)
-                total += np.where(alive, step_reward(states, action, next_states), 0.0)
-                alive &= ~np.asarray(absorbing(next_states), dtype=bool)
+                rewards, ended = reward(states, action, next_states)
+                total += np.where(alive, rewards, 0.0)
+                alive &= ~ended
                 states = next_states
                 if not alive.any():
                     break
@@ -364,22 +410,107 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
     return model_return
 
 
+class Ledger:
+    """The real-target transitions a method's problem hooks cost it, budget by budget.
+
+    Data hooks charge what they hand out. A rollout of a policy (U_M) is run once
+    per problem and its value kept, but charged at every budget that asks for it,
+    since each budget's learner used it.
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._rollouts: dict[int, tuple[Callable, float, int]] = {}
+        self._charged: set[int] = set()
+
+    def new_budget(self) -> None:
+        self.count, self._charged = 0, set()
+
+    def data(self, transitions: Transitions) -> Transitions:
+        self.count += len(transitions)
+        return transitions
+
+    def rollout(self, policy: Callable, run: Callable[[Callable], tuple[np.ndarray, np.ndarray]]) -> float:
+        entry = self._rollouts.get(id(policy))
+        if entry is None or entry[0] is not policy:
+            returns, lengths = run(policy)
+            entry = self._rollouts[id(policy)] = (policy, float(np.mean(returns)), int(np.sum(lengths)))
+        if id(policy) not in self._charged:
+            self._charged.add(id(policy))
+            self.count += entry[2]
+        return entry[1]
+
+
+def _reset_samples(spec: ExperimentSpec, seed: int, largest: int) -> Callable[[int], Transitions]:
+    """The reset protocol's data: heads of one stream of one-step transitions from the reset box."""
+    target = spec.target
+    description = describe(target)
+    reward = _target_reward(target)
+    cache: list[Transitions] = []
+
+    def samples(n: int) -> Transitions:
+        if not cache or len(cache[0]) < n:
+            rng = np.random.default_rng(derive_seed(seed, spec.name, "reset-data"))
+            size = max(n, largest)
+            states = description.reset_states(size, rng)
+            actions = rng.integers(description.n_actions, size=size)
+            next_states = sampling.step_from(
+                target.domain, target.task, states, actions, task_kwargs=target.task_kwargs
+            )
+            assert reward is not None, "a reset box without a reward"
+            rewards, absorbing = reward(states, actions, next_states)
+            cache[:] = [Transitions(states, actions, rewards, next_states, absorbing, np.ones(size, dtype=bool))]
+        return cache[0].head(n)
+
+    return samples
+
+
+def _episode_samples(spec: ExperimentSpec, seed: int) -> Callable[[Callable | None, int, int], Transitions]:
+    """The online protocol's data: whole episodes from the target's own starts, seeded per round."""
+    target = spec.target
+
+    def samples(policy: Callable | None, n: int, round_: int) -> Transitions:
+        return sampling.collect(
+            target.domain,
+            target.task,
+            n,
+            derive_seed(seed, spec.name, "online-data", str(round_)),
+            policy=policy,
+            task_kwargs=target.task_kwargs,
+            max_episode_steps=target.data.episode_steps,
+        )
+
+    return samples
+
+
+STREAM_DATA = ("shared", "stream")
+"""``data`` settings under which a method learns from the shared stream (counted by ``samples_used``)."""
+
+
 def transfer_problem(
     spec: ExperimentSpec,
     preset: Preset,
     artifacts: SourceArtifacts,
     seed: int,
+    ledger: Ledger | None = None,
 ) -> "method.TransferProblem":
-    """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its evaluation hooks."""
+    """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its hooks.
+
+    Every hook that touches the real target charges ``ledger`` (a fresh one if None).
+    """
+    ledger = Ledger() if ledger is None else ledger
     source, target = describe(spec.source), describe(spec.target)
-    eval_seed = derive_seed(seed, spec.name, "evaluation")  # the same start states as every evaluation
+    rollout_seed = _algorithm2_seed(spec, seed)
 
     def target_return(policy: Callable) -> float:
-        return float(np.mean(evaluate(spec, preset, policy, eval_seed)[0]))
+        return ledger.rollout(policy, lambda p: evaluate(spec, preset, p, rollout_seed))
 
+    policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))
+    reset_samples = _reset_samples(spec, seed, max(preset.target_budgets))
+    episode_samples = _episode_samples(spec, seed)
     return method.TransferProblem(
         source_q=artifacts.source_q,
-        mapping=artifacts.mapping,
+        mapping=QueriedMapping(artifacts.mapping, partial(_source_region, spec.source, source)),
         source_step=partial(_source_step, spec.source, source),
         source=source,
         target=target,
@@ -387,7 +518,10 @@ def transfer_problem(
         target_return=target_return,
         model_return=_model_return(spec, preset, seed),
         target_step=partial(_target_step, spec.target, target),
-        policy_samples=_nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets)),
+        policy_samples=lambda policy, n: ledger.data(policy_samples(policy, n)),
+        target_reward=_target_reward(spec.target),
+        reset_samples=lambda n: ledger.data(reset_samples(n)),
+        episode_samples=lambda policy, n, round_: ledger.data(episode_samples(policy, n, round_)),
     )
 
 
@@ -423,7 +557,9 @@ def run_method(
     """
     if transfer is None:
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
-    problem = transfer_problem(spec, preset, artifacts, seed)
+    ledger = Ledger()
+    problem = transfer_problem(spec, preset, artifacts, seed, ledger)
+    data = str(getattr(transfer, "data", "shared"))
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
     # A method that uses no target samples (an oracle, a reference) learns the same
     # policy at every budget: it is learned and evaluated once and its point repeated.
@@ -433,6 +569,7 @@ def run_method(
         if curve and not uses_samples:
             curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
             continue
+        ledger.new_budget()
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -440,11 +577,16 @@ def run_method(
         learn_s = time.perf_counter() - start
         start = time.perf_counter()
         returns, lengths = evaluate(spec, preset, policy, eval_seed)
+        reported = getattr(policy, "samples_used", None)
+        used = (int(budget) if reported is None else int(reported)) if uses_samples else 0
+        stream = used if data in STREAM_DATA else 0
         curve.append(
             {
                 "samples": int(budget),
-                # Algorithm 2 may stop before the budget; the curve still counts the budget.
-                "samples_used": int(getattr(policy, "samples_used", None) or budget) if uses_samples else 0,
+                # Algorithm 2 may stop before the budget: ``samples_used`` is what it kept.
+                "samples_used": used,
+                # Every real-target transition it learned from (stream, rollouts, own data).
+                "target_transitions": stream + ledger.count if uses_samples else 0,
                 "mean_return": float(np.mean(returns)),
                 "returns": [float(r) for r in returns],
                 "mean_steps": float(np.mean(lengths)),
@@ -462,6 +604,7 @@ def run_method(
         "curve": curve,
         "final_return": curve[-1]["mean_return"],
         "random_return": artifacts.random_return,
+        "data": data,
         "mapping_target_samples": artifacts.mapping_target_samples,
         "algorithm2_samples": None if final_used is None else int(final_used),
     }

@@ -140,10 +140,14 @@ def table(summary: dict) -> str:
         f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Methods are compared only over the "
         "seeds they all finished. Threshold = random return + "
         f"{summary.get('threshold_fraction', THRESHOLD_FRACTION):.0%} of (best method's mean final return "
-        "- random return). Samples to threshold: the smallest budget from which a seed's return stays at "
-        "or above the threshold for every larger budget ('never' if none); the median counts 'never' as "
-        f"infinite. vs {method_label(REFERENCE_METHOD)}: that median over {method_label(REFERENCE_METHOD)}'s "
-        f"(> 1: {method_label(REFERENCE_METHOD)} needed fewer target samples).",
+        "- random return). Samples to threshold: the real-target transitions a seed counted (its samples, "
+        "Algorithm 2's rollouts of the projected source policy, data it drew itself) at the smallest budget "
+        "from which its return stays at or above the threshold for every larger budget ('never' if none); "
+        f"the median counts 'never' as infinite. vs {method_label(REFERENCE_METHOD)}: that median over "
+        f"{method_label(REFERENCE_METHOD)}'s (> 1: {method_label(REFERENCE_METHOD)} needed fewer). Data: "
+        "`shared`, the random-policy stream every method shares; `reset`, one-step transitions from states "
+        "spread over the target's box (privileged: a simulator reset a robot lacks); `online`, "
+        "epsilon-greedy episodes from the task's own starts; `stream`/`source-policy`, the planner's.",
         "",
     ]
     for name, exp in summary["experiments"].items():
@@ -169,9 +173,9 @@ def table(summary: dict) -> str:
         if not comparison.meaningful:
             lines += [_no_threshold_sentence(comparison), ""]
         lines += [
-            f"| method | final return: mean ± sd (median) | target samples to threshold: median (per seed) "
-            f"| vs {method_label(REFERENCE_METHOD)} |",
-            "|---|---|---|---|",
+            f"| method | data | final return: mean ± sd (median) | target transitions to threshold: median "
+            f"(per seed) | vs {method_label(REFERENCE_METHOD)} |",
+            "|---|---|---|---|---|",
         ]
         reference = comparison.result(REFERENCE_METHOD)
         for r in comparison.methods:
@@ -183,7 +187,8 @@ def table(summary: dict) -> str:
                 ratio = _ratio(r, reference)
             else:
                 samples, ratio = "no meaningful threshold", "n/a"
-            lines.append(f"| {method_label(r.method)} | {final} | {samples} | {ratio} |")
+            data = exp["methods"][r.method].get("data", "shared")
+            lines.append(f"| {method_label(r.method)} | {data} | {final} | {samples} | {ratio} |")
         verdicts = [ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})]
         if any(verdicts):
             lines += ["", "Transfer against its ablation without the source:", ""]
@@ -279,8 +284,11 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     for r in results:
         data = experiment["methods"][r.method]
         rows = [data["seeds"].index(s) for s in r.seeds]
+        budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
+        counted = np.asarray(data["curve"].get("target_transitions", [budgets] * len(data["seeds"])), dtype=np.float64)
+        # Each seed at the target transitions it counted; a reference that counts none at its budget.
         curves[r.method] = (
-            np.asarray(data["curve"]["samples"], dtype=np.float64),
+            np.where(counted[rows] > 0, counted[rows], budgets),
             np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows],
         )
     references = [
@@ -290,14 +298,14 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     clipped = 0
     clipped_values: list[float] = []
     for r in results:
-        samples, returns = curves[r.method]
+        counts, returns = curves[r.method]
         color = colors[r.method]
-        for seed_returns in returns:
-            ax_curve.plot(samples, seed_returns, color=color, lw=0.7, alpha=0.45)
-            clipped += _mark_clipped(ax_curve, samples, seed_returns, limits, color)
+        for seed_counts, seed_returns in zip(counts, returns):
+            ax_curve.plot(seed_counts, seed_returns, color=color, lw=0.7, alpha=0.45)
+            clipped += _mark_clipped(ax_curve, seed_counts, seed_returns, limits, color)
             clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
         median = np.median(returns, axis=0)
-        ax_curve.plot(samples, median, color=color, lw=2.2, marker="o", ms=3.5)
+        ax_curve.plot(np.median(counts, axis=0), median, color=color, lw=2.2, marker="o", ms=3.5)
         seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
         handles.append(
             Line2D(
@@ -332,12 +340,12 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     ax_curve.set_ylim(*limits)
     ax_curve.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
     ax_curve.set_xscale("log")
-    budgets = sorted({b for samples, _ in curves.values() for b in samples})
+    budgets = sorted({float(b) for counts, _ in curves.values() for b in np.median(counts, axis=0)})
     span = math.log10(max(budgets) / min(budgets)) if budgets else 0.0
     x_ticks = spaced_ticks(budgets, max(0.12, span / 9))
     ax_curve.set_xticks(x_ticks, [compact(b) for b in x_ticks])
     ax_curve.minorticks_off()
-    ax_curve.set_xlabel("target samples")
+    ax_curve.set_xlabel("target transitions counted (samples, Algorithm 2's rollouts, own data)")
     ax_curve.set_ylabel("average return")
     ax_curve.set_title("(a) average return", fontsize=10)
     ax_curve.grid(alpha=0.25)

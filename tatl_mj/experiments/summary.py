@@ -12,10 +12,12 @@ Definitions (one place; the table, the figures and summary.json all use them):
 - No meaningful threshold: a threshold at or below ``R_random`` (no method beat
   the random policy on average) says nothing about learning speed; samples to
   threshold are then not reported and the experiment is judged on final returns.
-- Samples to threshold of one seed: the smallest budget from which its return
-  stays at or above the threshold at every larger budget (a method that crosses
-  and falls back has not reached it); ``math.inf`` if it never does (``null`` in
-  summary.json, which has no infinity).
+- Samples to threshold of one seed: the real-target transitions it counted
+  (``target_transitions``: its samples, Algorithm 2's rollouts, its own data) at
+  the smallest budget from which its return stays at or above the threshold at
+  every larger budget (a method that crosses and falls back has not reached it);
+  ``math.inf`` if it never does (``null`` in summary.json, which has no infinity).
+  Records from before transitions were counted fall back to the budget.
 
 :func:`compare` applies them to one experiment of a summary; the results table
 and panel (b) of the figures are both drawn from its answer.
@@ -35,21 +37,28 @@ from tatl_mj.experiments.records import RunDirectory, read_json
 THRESHOLD_FRACTION = 0.95
 
 
-def samples_to_threshold(samples: Sequence[float], returns: Sequence[float], threshold: float) -> float:
+def samples_to_threshold(
+    samples: Sequence[float],
+    returns: Sequence[float],
+    threshold: float,
+    counts: Sequence[float] | None = None,
+) -> float:
     """The smallest budget from which ``returns`` stay >= ``threshold`` for every larger budget.
 
     ``samples`` are the budgets in increasing order and ``returns`` the return at
-    each; ``math.inf`` if the last return is below the threshold.
+    each; ``math.inf`` if the last return is below the threshold. With ``counts``
+    (the target transitions counted at each budget) the answer is that budget's count.
     """
-    if len(samples) != len(returns):
-        raise ValueError(f"samples and returns differ in length: {len(samples)} != {len(returns)}")
+    if len(samples) != len(returns) or (counts is not None and len(counts) != len(samples)):
+        raise ValueError(f"samples, returns and counts differ in length: {len(samples)} != {len(returns)}")
     if any(b <= a for a, b in zip(samples[:-1], samples[1:])):
         raise ValueError(f"samples must be strictly increasing budgets, got {list(samples)}")
+    counted = samples if counts is None else counts
     reached = math.inf
-    for budget, value in zip(reversed(samples), reversed(returns)):
+    for count, value in zip(reversed(counted), reversed(returns)):
         if not value >= threshold:  # NaN counts as below
             break
-        reached = budget
+        reached = count
     return reached
 
 
@@ -149,9 +158,13 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
     for m, rows, _ in results:
         curve = data[m]["curve"]
         budgets = list(curve["samples"])
+        counts = curve.get("target_transitions")
         reached: tuple[float, ...] = ()
         if meaningful:
-            reached = tuple(samples_to_threshold(budgets, curve["mean_return"][i], threshold) for i in rows)
+            reached = tuple(
+                samples_to_threshold(budgets, curve["mean_return"][i], threshold, counts[i] if counts else None)
+                for i in rows
+            )
         out.append(
             MethodResult(
                 method=m,
@@ -177,7 +190,8 @@ def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
     """(transfer method, its source-free ablation) for every such pair a spec lists.
 
     Pairs go by built-in (``registry.ABLATION_OF``), so a variant (a table with
-    ``method = "ta-tl-h"``) is paired with the ablation of its built-in.
+    ``method = "ta-tl"``) is paired with the ablation of its built-in; of the
+    ablations a built-in names, the first the spec lists is its pair.
     """
     from tatl_mj.transfer import registry
 
@@ -188,13 +202,14 @@ def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
             return None
 
     bases = {name: base(name) for name in spec_methods}
-    return [
-        (name, other)
-        for name, b in bases.items()
-        if b in registry.ABLATION_OF
-        for other, ob in bases.items()
-        if ob == registry.ABLATION_OF[b]
-    ]
+    pairs = []
+    for name, b in bases.items():
+        for wanted in registry.ABLATION_OF.get(b or "", ()):
+            found = [other for other, ob in bases.items() if ob == wanted]
+            if found:
+                pairs.extend((name, other) for other in found)
+                break
+    return pairs
 
 
 def _side(mine: np.ndarray, theirs: np.ndarray, mine_centre: float, theirs_centre: float) -> tuple[int, int, int]:
@@ -281,7 +296,10 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
                 "samples": [p["samples"] for p in curves[0]],
                 "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
                 "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
+                # Every real-target transition counted at each budget ([seed][budget]).
+                "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
             },
+            "data": recs[seeds_done[0]].get("data", "shared"),
             "extra": {
                 k: [recs[s].get(k) for s in seeds_done]
                 for k in ("algorithm2_samples",)
@@ -304,10 +322,10 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
         # Per finished seed (not only the shared ones), against the shared-seed threshold.
         curve = out_methods[result.method]["curve"]
         out_methods[result.method]["samples_to_threshold"] = [
-            _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold))
+            _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold, counts))
             if comparison.meaningful
             else None
-            for returns in curve["mean_return"]
+            for returns, counts in zip(curve["mean_return"], curve["target_transitions"])
         ]
     experiment.update(
         {

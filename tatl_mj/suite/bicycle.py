@@ -537,4 +537,7 @@ def describe(task: str, **_: Any) -> TaskDescription:
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-TORQUE_LIMIT]),
         action_high=np.array([TORQUE_LIMIT]),
+        # Upright to the fall, and about the steer and rates random-policy episodes reach.
+        reset_low=np.array([-0.5, -1.5, -ROLL_LIMIT, -1.5]),
+        reset_high=np.array([0.5, 1.5, ROLL_LIMIT, 1.5]),
     )

@@ -173,5 +173,8 @@ def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskD
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-limit]),
         action_high=np.array([limit]),
+        # The track and the pole's fall angle, with the rates the source's FQI box covers.
+        reset_low=np.array([-X_LIMIT, -2.0, -THETA_LIMIT, -2.0]),
+        reset_high=np.array([X_LIMIT, 2.0, THETA_LIMIT, 2.0]),
         gymnasium_peer="CartPole-v1" if task == next(iter(TASKS)) else None,
     )

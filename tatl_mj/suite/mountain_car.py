@@ -352,4 +352,7 @@ def describe(task: str, **_: Any) -> TaskDescription:
         gymnasium_peer="MountainCar-v0" if task == next(iter(TASKS)) else None,
         state_low=np.array([SETTABLE_X[0], -np.inf]),
         state_high=np.array([SETTABLE_X[1], np.inf]),
+        # The classic task's box: the valley from the left wall to the goal, its speed limits.
+        reset_low=np.array([-1.2, -0.07]),
+        reset_high=np.array([0.6, 0.07]),
     )

@@ -289,5 +289,8 @@ def describe(task: str, params: PendulumParams | None = None, **_: Any) -> TaskD
         control_timestep=CONTROL_TIMESTEP,
         action_low=np.array([-limit]),
         action_high=np.array([limit]),
+        # Every angle, and the speeds the source's FQI box covers.
+        reset_low=np.array([-math.pi, -8.0]),
+        reset_high=np.array([math.pi, 8.0]),
         gymnasium_peer="Pendulum-v1" if task == next(iter(TASKS)) else None,
     )

@@ -6,8 +6,8 @@ Paper, eq. ``Apprentice_model``::
 
 fitted to (s_i, a_i, s_{i+1}) triplets from a random policy (Algorithm 2, step
 "solve the least square linear regression problem"), and grown batch by batch until
-the utility of the projected source policy on the true target and on the apprentice
-agree: ``|U_M(pi) - U_Mhat(pi)| <= zeta`` (Algorithm 2's stopping rule). As the paper
+the projected source policy does no worse on the apprentice than on the true target
+by more than zeta: ``U_M(pi) - U_Mhat(pi) <= zeta`` (Algorithm 2's stopping rule). As the paper
 does, the runner may reuse the alignment samples for it.
 
 Angles. A state coordinate marked ``periodic`` lives on the circle, wrapped to
@@ -202,10 +202,11 @@ def learn_apprentice(
     ridge: float = 0.0,
     periodic: Sequence[bool] | None = None,
 ) -> tuple[Apprentice, int]:
-    """Algorithm 2: fit on the first n = batch, 2 batch, ... samples until |U_M - U_Mhat| <= zeta.
+    """Algorithm 2: fit on the first n = batch, 2 batch, ... samples until the gap <= zeta.
 
     ``utility_gap(apprentice)`` returns U_M(pi) - U_Mhat(pi) for the projected source
-    policy (the runner computes it; it needs the target simulator). Returns the
+    policy, or any other gap to compare one-sided with zeta (a relative one is
+    non-negative); the runner computes it, as it needs the target simulator. Returns the
     apprentice and the number of target samples it used. Batches too small for a
     full-rank fit are skipped. If the rule is never met, the fit on all samples is
     returned with ``n_used = len(transitions)`` and a RuntimeWarning. ``periodic``
@@ -240,12 +241,12 @@ def learn_apprentice(
         gap = float(utility_gap(apprentice))
         if not math.isfinite(gap):
             raise ValueError(f"utility_gap returned {gap} for an apprentice fitted on {n} samples")
-        if abs(gap) <= zeta:
+        if gap <= zeta:
             return apprentice, n
     if apprentice is None:
         raise ValueError(f"no apprentice could be fitted on all {total} samples: {last_error}")
     warnings.warn(
-        f"apprentice stopping rule |U_M - U_Mhat| <= {zeta} not met with all {total} samples",
+        f"apprentice stopping rule (Algorithm 2, gap <= {zeta}) not met with all {total} samples",
         RuntimeWarning,
         stacklevel=2,
     )

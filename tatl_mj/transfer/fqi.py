@@ -6,6 +6,9 @@ FQI repeats for k = 1..K
     y_i = r_i + gamma * (1 - absorbing_i) * max_a Q_{k-1}(s'_i, a),     Q_k = fit((s_i, a_i) -> y_i)
 
 from Q_0 = 0 or from a given ``initial_q`` (UMA-TL starts from the mapped source Q).
+With a ``prior_q`` the regressor fits the residual instead, ``Q_k = prior_q + fit(y - prior_q)``,
+so the prior stays in every iterate (``uma-tl-prior``: the mapped source Q can then
+mislead every fit, and negative transfer can show).
 Two regressors are provided:
 
 - :class:`LinearRegressor`: ``Q(s, a) = w_a . phi(s)`` (the paper's single layer of RBF or
@@ -173,6 +176,24 @@ class TreeQ:
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
+class ResidualQ:
+    """``Q = prior + residual``: a fixed prior Q-function plus a fitted correction."""
+
+    prior: QFunction
+    residual: QFunction
+
+    @property
+    def n_actions(self) -> int:
+        return self.residual.n_actions
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        return self.prior.values(states) + self.residual.values(states)
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return _argmax(self.values(states))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
 class ZeroQ:
     """Q = 0 everywhere (FQI's Q_0 when no initial Q is given)."""
 
@@ -216,22 +237,30 @@ def fitted_q_iteration(
     iterations: int,
     initial_q: QFunction | None = None,
     rng: np.random.Generator | None = None,
+    prior_q: QFunction | None = None,
 ) -> QFunction:
     """Fitted Q-Iteration; returns Q_K (K = ``iterations``) with a greedy policy.
 
     ``initial_q`` is Q_0, the bootstrap of the first iteration (UMA-TL); absorbing
     transitions bootstrap nothing, a time limit (``last`` without ``absorbing``) does.
+    ``prior_q`` (not with ``initial_q``) makes every iterate ``prior_q + residual``,
+    the regressor fitting ``y - prior_q(s, a)``; Q_0 is then ``prior_q`` itself.
     """
     _check_fqi_inputs(transitions, n_actions, gamma, iterations, initial_q)
+    if prior_q is not None:
+        if initial_q is not None:
+            raise ValueError("give initial_q or prior_q, not both: with a prior, Q_0 is the prior")
+        if prior_q.n_actions != n_actions:
+            raise ValueError(f"prior_q has {prior_q.n_actions} actions, expected n_actions={n_actions}")
     q0 = initial_q if initial_q is not None else ZeroQ(int(n_actions))
     if isinstance(regressor, LinearRegressor):
-        return _fqi_linear(transitions, int(n_actions), regressor, gamma, int(iterations), q0)
+        return _fqi_linear(transitions, int(n_actions), regressor, gamma, int(iterations), q0, prior_q)
     if isinstance(regressor, ExtraTreesRegressor):
         if regressor.seed is not None:
             seed = int(regressor.seed)
         else:
             seed = int(rng.integers(2**31 - 1)) if rng is not None else 0
-        return _fqi_trees(transitions, int(n_actions), regressor, gamma, int(iterations), q0, seed)
+        return _fqi_trees(transitions, int(n_actions), regressor, gamma, int(iterations), q0, seed, prior_q)
     raise ValueError(f"regressor must be a LinearRegressor or ExtraTreesRegressor, got {type(regressor).__name__}")
 
 
@@ -250,8 +279,14 @@ def _unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _fqi_linear(
-    t: Transitions, n_actions: int, reg: LinearRegressor, gamma: float, iterations: int, q0: QFunction
-) -> LinearQ:
+    t: Transitions,
+    n_actions: int,
+    reg: LinearRegressor,
+    gamma: float,
+    iterations: int,
+    q0: QFunction,
+    prior: QFunction | None = None,
+) -> LinearQ | ResidualQ:
     # Exact equal-state grouping: features and Q_0 are evaluated once per distinct state,
     # and when the distinct next states are few (a grid, a discretised task) each iteration
     # runs on the empirical model instead of the samples (_iterate_on_model).
@@ -276,10 +311,20 @@ def _fqi_linear(
         gram = (phi_states[seen].T * counts[a, seen]) @ phi_states[seen] + reg.ridge * np.eye(k)
         factors.append(scipy.linalg.cho_factor(gram, check_finite=False))
     phi_next = reg.features(nexts)
+    if prior is not None:
+        # The residual's targets are y - prior(s, a); its bootstrap adds the prior back.
+        prior_next = prior.values(nexts)
+        prior_taken = prior.values(states)[state_of, t.actions]
+        with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
+            weights = _iterate_on_samples(
+                t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, prior_next,
+                prior_taken=prior_taken, prior_next=prior_next,
+            )  # fmt: skip
+        return ResidualQ(prior, LinearQ(reg.features, weights))
     next_values = q0.values(nexts)
     iterate = _iterate_on_model if len(nexts) * n_actions <= len(t) else _iterate_on_samples
     # An iteration is a few memory-bound matrix-vector products: BLAS threads only add
-    # synchronisation (mountain car source, 2 cores: 19 s with 2 threads, 6.5 s with 1).
+    # synchronisation.
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
         weights = iterate(
             t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values
@@ -288,17 +333,32 @@ def _fqi_linear(
 
 
 def _iterate_on_samples(
-    t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values
+    t,
+    n_actions,
+    gamma,
+    iterations,
+    factors,
+    phi_states,
+    state_of,
+    phi_next,
+    next_of,
+    next_values,
+    prior_taken=None,
+    prior_next=None,
 ) -> np.ndarray:
     """FQI sample by sample: per iteration one pass over the next-state features and one
     over the state features (both stored action-block-contiguous, transposed, so each
-    product is one BLAS call with a long inner dimension)."""
+    product is one BLAS call with a long inner dimension). With ``prior_taken`` (N,) and
+    ``prior_next`` (V, A) the weights fit the residual from that prior."""
     order = np.argsort(t.actions, kind="stable")
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
     blocks = [slice(int(bounds[a]), int(bounds[a + 1])) for a in range(n_actions)]
     phi_t = np.ascontiguousarray(phi_states[state_of[order]].T)  # (k, N)
     phi_next_t = np.ascontiguousarray(phi_next[next_of[order]].T)  # (k, N)
     rewards = t.rewards[order]
+    if prior_taken is not None:
+        rewards = rewards - prior_taken[order]
+    offset_t = 0.0 if prior_next is None else np.ascontiguousarray(prior_next[next_of[order]].T)  # (A, N)
     continues = gamma * (~t.absorbing[order])
     best_next = next_values[next_of[order]].max(axis=1)
     weights = np.zeros((n_actions, phi_t.shape[0]))
@@ -306,7 +366,7 @@ def _iterate_on_samples(
         y = rewards + continues * best_next
         for a, block in enumerate(blocks):
             weights[a] = scipy.linalg.cho_solve(factors[a], phi_t[:, block] @ y[block], check_finite=False)
-        best_next = (weights @ phi_next_t).max(axis=0)
+        best_next = (weights @ phi_next_t + offset_t).max(axis=0)
     return weights
 
 
@@ -348,7 +408,8 @@ def _fqi_trees(
     iterations: int,
     q0: QFunction,
     seed: int,
-) -> TreeQ:
+    prior: QFunction | None = None,
+) -> TreeQ | ResidualQ:
     missing = sorted(set(range(n_actions)) - set(np.unique(t.actions).tolist()))
     if missing:
         raise ValueError(f"transitions contain no sample of actions {missing}; FQI cannot fit Q for them")
@@ -356,9 +417,10 @@ def _fqi_trees(
         raise ValueError(f"too few transitions ({len(t)}) for min_samples_split={reg.min_samples_split}")
     inputs = np.hstack([t.states, t.actions[:, None].astype(np.float64)])
     continues = gamma * (~t.absorbing)
-    q: QFunction = q0
+    q: QFunction = q0 if prior is None else prior
+    taken = 0.0 if prior is None else prior.values(t.states)[np.arange(len(t)), t.actions]
     for _ in range(iterations):
-        y = t.rewards + continues * q.values(t.next_states).max(axis=1)
+        y = t.rewards + continues * q.values(t.next_states).max(axis=1) - taken
         forest = ensemble.ExtraTreesRegressor(
             n_estimators=reg.n_estimators,
             min_samples_split=reg.min_samples_split,
@@ -368,6 +430,8 @@ def _fqi_trees(
         )
         forest.fit(inputs, y)
         q = TreeQ(forest, n_actions, t.state_dim)
+        if prior is not None:
+            q = ResidualQ(prior, q)
     return q
 
 
@@ -484,6 +548,7 @@ __all__ = [
     "QFunction",
     "REGRESSOR_KINDS",
     "Regressor",
+    "ResidualQ",
     "TabularQ",
     "TreeQ",
     "ZeroQ",

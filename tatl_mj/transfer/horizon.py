@@ -141,6 +141,8 @@ class HorizonTATLPolicy:
         the actuator range (1 where the range is unbounded). The probe goes towards the
         inside of the range, so a clipping simulator sees the perturbation.
       samples_used: target samples the model used, for reports (as TATLPolicy's).
+      admissible: optional (n_ad, mT) action set the clipped action is snapped to
+        (its nearest row), e.g. the target's discrete actions.
     """
 
     model: TargetModel
@@ -159,6 +161,7 @@ class HorizonTATLPolicy:
     affine: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     delta: np.ndarray | None = None
     samples_used: int | None = None
+    admissible: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.model):
@@ -234,6 +237,12 @@ class HorizonTATLPolicy:
                 raise ValueError(f"delta must be finite numbers > 0, one or {m} of them, got {self.delta!r}")
             delta = np.broadcast_to(delta.ravel(), (m,)).copy()
         object.__setattr__(self, "delta", delta)
+        if self.admissible is not None:
+            admissible = np.asarray(self.admissible, dtype=np.float64)
+            admissible = admissible[:, None] if admissible.ndim == 1 else admissible
+            if admissible.ndim != 2 or admissible.shape[1] != m or len(admissible) == 0:
+                raise ValueError(f"admissible must be an (n_ad, {m}) array, got shape {np.shape(self.admissible)}")
+            object.__setattr__(self, "admissible", admissible)
         if self.affine is not None:
             if self.periodic is not None:
                 raise ValueError("affine (closed-form responses) cannot be used with periodic coordinates")
@@ -331,6 +340,9 @@ class HorizonTATLPolicy:
             rows, gap.reshape(n, self.horizon * d), root.max() * np.abs(control).max(axis=(1, 2, 3))
         )
         action = np.clip(nominal + adaptive, self.target_low, self.target_high)
+        if self.admissible is not None:
+            gaps = np.linalg.norm(action[:, None, :] - self.admissible[None, :, :], axis=2)
+            action = self.admissible[np.argmin(gaps, axis=1)]
         return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
@@ -427,6 +439,9 @@ class HorizonTATL(TATL):
     horizon: int = 20
     step_ratio: float | None = None
     weights: tuple[float, ...] = ()
+    # Every sample, like its source-free ablation (which has no source to run
+    # Algorithm 2 with), so the pair is compared on equal data; a spec may set zeta.
+    zeta: float | None = None
     reference: str = "source"
     source_zero: tuple[str, ...] = ()
     model: str = "apprentice"
@@ -521,6 +536,7 @@ class HorizonTATL(TATL):
             periodic=periodic if periodic and any(periodic) else None,
             affine=affine,
             samples_used=used,
+            admissible=self.admissible_actions(target),
             **source,
         )
 

@@ -27,9 +27,9 @@ import numpy as np
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
-from tatl_mj.transfer.baselines import rl, uma_tl
+from tatl_mj.transfer.baselines import MappedQ
 from tatl_mj.transfer.features import Features, make_features
-from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, make_regressor
+from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, make_regressor
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, SourceStep, TATLPolicy
 from tatl_mj.transitions import Transitions
 
@@ -66,6 +66,19 @@ class TransferProblem:
         protocol for the apprentice's data ("execute pi*(S) in the target from
         random starts"), for a method that spends its budget that way instead of
         on the shared random-policy stream.
+      target_reward: the target task's own reward and end condition of a step,
+        ``(states, action_indices, next_states) -> (rewards (N,), absorbing (N,))``,
+        for a learner that scores a model's transitions (``apprentice-fqi``).
+      reset_samples: ``reset_samples(n)`` -> n one-step target transitions from
+        states spread over the target's reset box with random actions (the
+        ``reset`` data protocol; privileged: a simulator reset a robot lacks).
+      episode_samples: ``episode_samples(policy, n, round)`` -> n transitions of
+        whole episodes of an index ``policy`` (None: uniformly random actions)
+        from the target's own start states, the resets seeded by ``round``
+        (the ``online`` data protocol; no resets to chosen states).
+
+    Every real-target transition a hook hands out or rolls out is counted
+    against the method (``target_transitions`` in the records).
     """
 
     source_q: QFunction
@@ -78,6 +91,9 @@ class TransferProblem:
     model_return: Callable[[Model, Policy], float] | None = None
     target_step: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
     policy_samples: Callable[[Policy, int], Transitions] | None = None
+    target_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+    reset_samples: Callable[[int], Transitions] | None = None
+    episode_samples: Callable[[Callable | None, int, int], Transitions] | None = None
 
     def __post_init__(self) -> None:
         if self.source.n_actions != self.target.n_actions:
@@ -113,25 +129,25 @@ class TransferProblem:
         """Whether Algorithm 2's utility gap can be computed (both hooks given)."""
         return self.target_return is not None and self.model_return is not None
 
-    @functools.cached_property
-    def _projected_utility(self) -> float:
-        assert self.target_return is not None
-        return float(self.target_return(self.projected_source_policy()))
+    def utility_gap(self, model: Model, kind: str = "absolute") -> float:
+        """Algorithm 2's gap between U_M(pi) and U_Mhat(pi) for the projected source policy.
 
-    def utility_gap(self, model: Model) -> float:
-        """Algorithm 2's relative gap |U_M(pi) - U_Mhat(pi)| / |U_M(pi)| of the projected source policy.
-
-        U_M is computed once per problem; a model whose rollout diverges is as far
-        from the target as can be (1e300).
+        ``"absolute"`` (the paper's): U_M - U_Mhat, compared one-sided with zeta;
+        ``"relative"``: |U_M - U_Mhat| / |U_M|. Both come from the same start
+        states (the problem's hooks say which), and U_M's real-target rollouts are
+        counted against the method that asks. A model whose rollout diverges is as
+        far from the target as can be (1e300).
         """
         if not self.has_utility_gap:
             raise ValueError("this problem has no target_return/model_return hooks: no utility gap")
-        assert self.model_return is not None
-        u_true = self._projected_utility
+        assert self.target_return is not None and self.model_return is not None
+        u_true = float(self.target_return(self.projected_source_policy()))
         u_hat = self.model_return(model, self.projected_source_policy())
         if not math.isfinite(u_hat):
             return 1e300
-        return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
+        if kind == "relative":
+            return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
+        return u_true - u_hat
 
 
 @runtime_checkable
@@ -193,6 +209,7 @@ class GreedyPolicy:
     q: QFunction
     target_actions: np.ndarray
     discrete: bool = False
+    samples_used: int | None = None  # shared-stream samples it learned from (None: the whole budget)
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         idx = self.q.greedy(target_states)
@@ -211,23 +228,36 @@ class TATL:
       apprentice: basis phi of the apprentice s' = W phi(s) + B a (a features spec,
         ``tatl_mj.transfer.features.make_features``).
       ridge: ridge of the apprentice's least squares (0: plain least squares).
-      zeta: Algorithm 2's threshold on the relative utility gap; the apprentice grows
-        by ``batch`` samples until the gap is <= zeta. None fits it on every sample.
+      zeta: Algorithm 2's threshold; the apprentice grows by ``batch`` samples until
+        the utility gap is <= zeta. None fits it on every sample.
+      gap: ``"absolute"``, the paper's one-sided U_M - U_Mhat <= zeta (in return
+        units), or ``"relative"``, |U_M - U_Mhat| / |U_M| <= zeta.
       batch: Algorithm 2's sample increment (None: all samples at once).
-      adaptive_actions: the admissible set A_ad (values of a one-dimensional
-        actuator); empty: any value within the actuator limits.
+      actions: ``"discrete"``: the action is snapped to the target's discrete
+        action set, the one the FQI baselines choose from, so every method is
+        compared within the same actions; ``"continuous"``: any value within the
+        actuator limits (a labelled variant).
+      adaptive_actions: an explicit admissible set A_ad (values of a one-dimensional
+        actuator) to snap to instead.
     """
 
     apprentice: dict = dataclasses.field(default_factory=lambda: {"kind": "linear"})
     ridge: float = 0.0
     zeta: float | None = 0.1
+    gap: str = "absolute"
     batch: int | None = None
+    actions: str = "discrete"
     adaptive_actions: tuple[float, ...] = ()
     name: str = "ta-tl"
+
+    GAPS = ("absolute", "relative")
+    ACTION_SETS = ("discrete", "continuous")
 
     def __post_init__(self) -> None:
         owner = type(self).__name__
         check_features(owner, "apprentice", self.apprentice)
+        _check_choice(owner, "gap", self.gap, self.GAPS)
+        _check_choice(owner, "actions", self.actions, self.ACTION_SETS)
         _check_number(owner, "ridge", self.ridge, 0.0)
         if self.zeta is not None:
             _check_number(owner, "zeta", self.zeta, 0.0, low_open=True)
@@ -265,7 +295,7 @@ class TATL:
             target_samples,
             actions,
             self.features(target),
-            problem.utility_gap,
+            functools.partial(problem.utility_gap, kind=self.gap),
             self.zeta,
             self.batch or len(target_samples),
             self.ridge,
@@ -275,7 +305,6 @@ class TATL:
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
         apprentice, used = self.fit_apprentice(problem, target_samples)
         target = problem.target
-        adaptive = np.asarray(self.adaptive_actions, dtype=np.float64).reshape(-1, 1) if self.adaptive_actions else None
         common = dict(
             source_q=problem.source_q,
             mapping=problem.mapping,
@@ -285,10 +314,19 @@ class TATL:
             target_actions=target.action_values,
             target_low=target.action_low,
             target_high=target.action_high,
-            adaptive_actions=adaptive,
+            adaptive_actions=self.admissible_actions(target),
             samples_used=used,
         )
         return DiscreteTATLPolicy(**common) if target.discrete else TATLPolicy(**common)
+
+    def admissible_actions(self, target: TaskDescription) -> np.ndarray | None:
+        """The set the action is snapped to: A_ad if given, the target's discrete
+        action set for ``actions = "discrete"``, else None (clipped only)."""
+        if self.adaptive_actions:
+            return np.asarray(self.adaptive_actions, dtype=np.float64).reshape(-1, 1)
+        if self.actions == "discrete" and not target.discrete:
+            return np.asarray(target.action_values, dtype=np.float64)
+        return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -302,9 +340,13 @@ class ProjectedSource:
         return problem.projected_source_policy()
 
 
+DATA_PROTOCOLS = ("shared", "reset", "online")
+"""Where a target learner's transitions come from (``TargetFQI.data``)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class TargetFQI:
-    """Settings of target Fitted Q-Iteration, shared by :class:`UMATL` and :class:`RL`.
+    """Target Fitted Q-Iteration, the learner of :class:`UMATL`, :class:`RL` and their kin.
 
     Attributes:
       features: basis of the linear regressor (a features spec, default linear);
@@ -313,6 +355,15 @@ class TargetFQI:
       ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
       n_estimators: extra-trees' tree count (default 50); refused for linear.
       gamma, iterations: FQI's discount and iteration count.
+      data: where its n target transitions come from (n: the budget):
+        ``"shared"``, the first n of the random-policy stream every method shares;
+        ``"reset"``, n one-step transitions from states spread over the target's
+        reset box (privileged: a simulator reset that a robot lacks);
+        ``"online"``, epsilon-greedy episodes from the task's own start states,
+        refitting as the data double (random actions for the first
+        ``online_batch``), no resets to chosen states.
+      epsilon: the online protocol's exploration rate.
+      online_batch: the online protocol's first, random-policy collection.
     """
 
     features: dict | None = None
@@ -321,8 +372,11 @@ class TargetFQI:
     n_estimators: int | None = None
     gamma: float = 0.95
     iterations: int = 20
+    data: str = "shared"
+    epsilon: float = 0.1
+    online_batch: int = 100
     name: str = "target-fqi"
-    from_source = False  # UMA-TL starts from the mapped source Q
+    source_use = "none"  # how the mapped source Q enters: "none", "initial" (Q_0) or "prior" (every fit)
 
     def __post_init__(self) -> None:
         owner = type(self).__name__
@@ -340,6 +394,9 @@ class TargetFQI:
             check_features(owner, "features", self.linear_features)
         _check_number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
         _check_number(owner, "iterations", self.iterations, 1, integer=True)
+        _check_choice(owner, "data", self.data, DATA_PROTOCOLS)
+        _check_number(owner, "epsilon", self.epsilon, 0.0, 1.0)
+        _check_number(owner, "online_batch", self.online_batch, 1, integer=True)
 
     @property
     def linear_features(self) -> dict:
@@ -348,6 +405,10 @@ class TargetFQI:
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         if self.regressor == "linear":
             check_features(type(self).__name__, "features", self.linear_features, target.state_dim)
+        if self.data == "reset" and target.reset_low is None and not (target.discrete and target.known_model):
+            raise ValueError(
+                f"{type(self).__name__}.data = 'reset' needs a reset box; {target.domain}/{target.task} declares none"
+            )
 
     def regressor_spec(self) -> dict:
         spec: dict = {"kind": self.regressor, "features": self.linear_features}
@@ -357,31 +418,83 @@ class TargetFQI:
             spec["n_estimators"] = self.n_estimators
         return spec
 
+    def fqi(self, problem: TransferProblem, data: Transitions, rng: np.random.Generator) -> QFunction:
+        """FQI on ``data``, with the mapped source Q as this learner's ``source_use`` says."""
+        regressor = make_regressor(self.regressor_spec(), data.state_dim)
+        mapped = MappedQ(problem.source_q, problem.mapping) if self.source_use != "none" else None
+        return fitted_q_iteration(
+            data,
+            problem.n_actions,
+            regressor,
+            self.gamma,
+            self.iterations,
+            initial_q=mapped if self.source_use == "initial" else None,
+            prior_q=mapped if self.source_use == "prior" else None,
+            rng=rng,
+        )
+
+    def fit(self, problem: TransferProblem, data: Transitions, rng: np.random.Generator) -> QFunction:
+        """The Q-function this learner makes of its target transitions (a subclass's own step)."""
+        return self.fqi(problem, data, rng)
+
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
-        regressor = make_regressor(self.regressor_spec(), target_samples.state_dim)
         rng = np.random.default_rng(problem.seed)
-        if self.from_source:
-            q = uma_tl(
-                problem.source_q,
-                problem.mapping,
-                target_samples,
-                problem.n_actions,
-                regressor,
-                self.gamma,
-                self.iterations,
-                rng=rng,
-            )
+        n = len(target_samples)
+        if self.data == "shared":
+            q = self.fit(problem, target_samples, rng)
+        elif self.data == "reset":
+            if problem.reset_samples is None:
+                raise ValueError(f"{type(self).__name__}(data='reset') needs the problem's reset_samples")
+            q = self.fit(problem, problem.reset_samples(n), rng)
         else:
-            q = rl(target_samples, problem.n_actions, regressor, self.gamma, self.iterations, rng=rng)
-        return GreedyPolicy(q, problem.target.action_values, problem.target.discrete)
+            q = self._online(problem, n, rng)
+        used = n if self.data == "shared" else 0  # the others draw their own, counted by the hooks
+        return GreedyPolicy(q, problem.target.action_values, problem.target.discrete, samples_used=used)
+
+    def _online(self, problem: TransferProblem, n: int, rng: np.random.Generator) -> QFunction:
+        """Epsilon-greedy FQI: random episodes first, then the data doubled by the current greedy policy."""
+        if problem.episode_samples is None:
+            raise ValueError(f"{type(self).__name__}(data='online') needs the problem's episode_samples")
+        data = problem.episode_samples(None, min(n, self.online_batch), 0)
+        round_ = 0
+        while True:
+            q = self.fit(problem, data, rng)
+            if len(data) >= n:
+                return q
+            round_ += 1
+            more = problem.episode_samples(_epsilon_greedy(q, self.epsilon, rng), min(len(data), n - len(data)), round_)
+            data = Transitions.concatenate([data, more])
+
+
+def _epsilon_greedy(q: QFunction, epsilon: float, rng: np.random.Generator) -> Callable[[np.ndarray], np.ndarray]:
+    """Index policy: greedy in ``q``, a uniformly random action with probability ``epsilon``."""
+
+    def policy(states: np.ndarray) -> np.ndarray:
+        greedy = q.greedy(states)
+        explore = rng.random(len(greedy)) < epsilon
+        return np.where(explore, rng.integers(q.n_actions, size=len(greedy)), greedy)
+
+    return policy
 
 
 @dataclasses.dataclass(frozen=True)
 class UMATL(TargetFQI):
-    """UMA-TL: target FQI initialised with the mapped source Q (Ammar et al. 2015)."""
+    """UMA-TL: target FQI initialised with the mapped source Q (Ammar et al. 2015).
+
+    The mapped source Q is only the first iteration's bootstrap: after enough
+    iterations its influence is gone (see :class:`UMATLPrior`)."""
 
     name: str = "uma-tl"
-    from_source = True
+    source_use = "initial"
+
+
+@dataclasses.dataclass(frozen=True)
+class UMATLPrior(TargetFQI):
+    """UMA-TL whose mapped source Q stays in every fit: FQI on the residual from it,
+    so a misleading source can show as negative transfer (not the paper's baseline)."""
+
+    name: str = "uma-tl-prior"
+    source_use = "prior"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -392,6 +505,7 @@ class RL(TargetFQI):
 
 
 __all__ = [
+    "DATA_PROTOCOLS",
     "GreedyPolicy",
     "Model",
     "Policy",
@@ -402,5 +516,6 @@ __all__ = [
     "TransferMethod",
     "TransferProblem",
     "UMATL",
+    "UMATLPrior",
     "check_features",
 ]

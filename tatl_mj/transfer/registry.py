@@ -13,7 +13,8 @@ import functools
 from typing import Any, Callable
 
 from tatl_mj.transfer.horizon import HorizonTATL
-from tatl_mj.transfer.method import RL, TATL, UMATL, ProjectedSource, TransferMethod
+from tatl_mj.transfer.method import RL, TATL, UMATL, ProjectedSource, TransferMethod, UMATLPrior
+from tatl_mj.transfer.model_based import ApprenticeFQI
 from tatl_mj.transfer.tabular import OneStepOracle, ReplanTATL
 
 METHODS: dict[str, Callable[..., TransferMethod]] = {
@@ -21,6 +22,13 @@ METHODS: dict[str, Callable[..., TransferMethod]] = {
     "ta-tl": TATL,
     "uma-tl": UMATL,
     "rl": RL,
+    # Fair-comparison baselines and ablations: other data protocols, a source prior
+    # that stays in every fit, and TA-TL's own apprentice without the source.
+    "rl-reset": functools.partial(RL, data="reset"),
+    "rl-online": functools.partial(RL, data="online"),
+    "uma-tl-reset": functools.partial(UMATL, data="reset"),
+    "uma-tl-prior": UMATLPrior,
+    "apprentice-fqi": ApprenticeFQI,
     # Extensions, each named apart from the paper's rule, and the ablations that credit them.
     "ta-tl-h": HorizonTATL,
     "apprentice-upright": functools.partial(HorizonTATL, reference="zero"),
@@ -34,19 +42,26 @@ METHODS: dict[str, Callable[..., TransferMethod]] = {
 }
 """Built-in methods: name -> factory(**settings)."""
 
-SOURCE_FREE = ("rl", "apprentice-upright", "replan-no-source")
+SOURCE_FREE = ("rl", "rl-reset", "rl-online", "apprentice-fqi", "apprentice-upright", "replan-no-source")
 """Methods that never look at the source: the ablations a transfer win is measured against."""
 
-ABLATION_OF: dict[str, str] = {
-    "ta-tl-h": "apprentice-upright",
-    "ta-tl-replan": "replan-no-source",
-    "ta-tl-replan-protocol": "replan-no-source",
+ABLATION_OF: dict[str, tuple[str, ...]] = {
+    "ta-tl": ("apprentice-fqi", "replan-no-source"),
+    "ta-tl-h": ("apprentice-upright",),
+    "ta-tl-replan": ("replan-no-source",),
+    "ta-tl-replan-protocol": ("replan-no-source",),
+    "uma-tl": ("rl",),
+    "uma-tl-prior": ("rl",),
+    "uma-tl-reset": ("rl-reset",),
 }
-"""Extension -> the built-in that is the same method without the source: the one a
-win must beat to be credited to transfer (reports state, per experiment, whether it does)."""
+"""Transfer method -> the built-ins that are the same method without the source, in
+order of preference: the first a spec lists is the one a win must beat to be credited
+to transfer (``ta-tl``: the model-based learner on its own apprentice; on the grid,
+whose targets are cells, the planner on the tabular apprentice)."""
 
-BASELINES = ("uma-tl", "rl")
-"""The paper's comparison methods (reports compare every other method with them)."""
+BASELINES = ("uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset")
+"""The comparison methods (reports compare every other method with them); ``-reset``
+ones use privileged simulator resets."""
 
 
 VARIANT_KEY = "method"

@@ -1,0 +1,280 @@
+"""Fair comparisons: the source-free model-based ablation, data protocols that let
+baselines learn, a source prior that stays, and every real-target transition counted."""
+
+import dataclasses
+import tomllib
+import types
+
+import numpy as np
+import pytest
+from conftest import ROOT, TINY
+
+from tatl_mj import sampling
+from tatl_mj.description import TaskDescription
+from tatl_mj.experiments import pipeline, summary
+from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.transfer import registry
+from tatl_mj.transfer.alignment import IdentityMapping
+from tatl_mj.transfer.features import LinearFeatures
+from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
+from tatl_mj.transfer.method import RL, UMATL, TransferProblem, UMATLPrior
+from tatl_mj.transfer.model_based import ApprenticeFQI
+from tatl_mj.transitions import Transitions
+
+ACTIONS = np.array([[-1.0], [0.0], [1.0]])
+A = np.array([[1.0, 0.1], [-0.2, 0.95]])
+B = np.array([[0.0], [0.3]])
+C = np.array([0.01, -0.02])
+
+
+def _linear_step(states, values):
+    """A linear target, s' = A s + B a + c: an apprentice with features [1, s] fits it exactly."""
+    return states @ A.T + values @ B.T + C
+
+
+def _reward(states, actions, next_states):
+    return -np.sum(next_states**2, axis=1), np.abs(next_states[:, 0]) > 1.5
+
+
+def _toy(**overrides):
+    description = TaskDescription(
+        domain="toy",
+        task="linear",
+        state_names=("x", "v"),
+        periodic=(False, False),
+        action_values=ACTIONS,
+        discrete=False,
+        control_timestep=0.1,
+        action_low=[-1.0],
+        action_high=[1.0],
+        reset_low=[-1.0, -1.0],
+        reset_high=[1.0, 1.0],
+    )
+    kwargs = dict(
+        source_q=types.SimpleNamespace(n_actions=3),
+        mapping=IdentityMapping(),
+        source_step=lambda x, i: x,
+        source=description,
+        target=description,
+        seed=3,
+        target_reward=_reward,
+    )
+    kwargs.update(overrides)
+    return TransferProblem(**kwargs)
+
+
+def _true_samples(n, seed):
+    rng = np.random.default_rng(seed)
+    states = rng.uniform(-1, 1, size=(n, 2))
+    actions = rng.integers(3, size=n)
+    nxt = _linear_step(states, ACTIONS[actions])
+    rewards, absorbing = _reward(states, actions, nxt)
+    return Transitions(states, actions, rewards, nxt, absorbing, np.ones(n, bool))
+
+
+def test_apprentice_fqi_with_an_exact_model_equals_fqi_on_the_true_dynamics():
+    problem = _toy()
+    method = ApprenticeFQI(
+        apprentice={"kind": "linear"}, features={"kind": "linear"}, gamma=0.9, iterations=30, model_samples=500
+    )
+    q = method.fit(problem, _true_samples(50, 0), np.random.default_rng(7))
+    # The same reset-box states and actions, stepped by the true system.
+    rng = np.random.default_rng(7)
+    states = problem.target.reset_states(500, rng)
+    actions = rng.integers(3, size=500)
+    nxt = _linear_step(states, ACTIONS[actions])
+    rewards, absorbing = _reward(states, actions, nxt)
+    truth = Transitions(states, actions, rewards, nxt, absorbing, np.ones(500, bool))
+    expected = fitted_q_iteration(truth, 3, LinearRegressor(LinearFeatures(), 1e-6), 0.9, 30)
+    probe = np.random.default_rng(1).uniform(-1, 1, size=(200, 2))
+    np.testing.assert_allclose(q.values(probe), expected.values(probe), rtol=1e-6, atol=1e-8)
+    # And it never touches the source: the problem's source fields are dummies here.
+    policy = method.learn(problem, _true_samples(50, 0))
+    assert policy.samples_used == 50 and policy(probe).shape == (200, 1)
+
+
+def test_uma_tl_prior_keeps_the_source_in_every_fit():
+    """Bias-only features: RL and UMA-TL can only learn one value per action, whatever the
+    state; with the prior kept, Q(s, a) = Q_S(s, a) + c_a, where one iteration's c_a is the
+    mean over action a's samples of r + gamma max_b Q_S(s', b) - Q_S(s, a)."""
+
+    class SourceQ:
+        n_actions = 3
+
+        def values(self, x):
+            return np.asarray(x)[:, :1] * ACTIONS[:, 0][None, :]
+
+        def greedy(self, x):
+            return np.argmax(self.values(x), axis=1)
+
+    data = _true_samples(300, 2)
+    problem = _toy(source_q=SourceQ())
+    features = {"kind": "rbf", "centers": [[0.0, 0.0]], "sigma": [1e6, 1e6], "bias": False, "periodic": [False, False]}
+    rng = np.random.default_rng(0)
+    prior = UMATLPrior(features=features, gamma=0.5, iterations=1).fit(problem, data, rng)
+    source = SourceQ()
+    y = data.rewards + 0.5 * (~data.absorbing) * source.values(data.next_states).max(axis=1)
+    y -= source.values(data.states)[np.arange(len(data)), data.actions]
+    probe = np.array([[-0.8, 0.0], [0.8, 0.0]])
+    for a in range(3):
+        c = y[data.actions == a].mean()
+        np.testing.assert_allclose(prior.values(probe)[:, a], source.values(probe)[:, a] + c, rtol=1e-4)
+    # The state-blind baselines pick one action everywhere; the prior's choice follows the source.
+    for blind in (RL(features=features, gamma=0.5, iterations=20), UMATL(features=features, gamma=0.5, iterations=20)):
+        assert len(set(blind.fit(problem, data, rng).greedy(probe))) == 1
+    assert list(UMATLPrior(features=features, gamma=0.5, iterations=20).fit(problem, data, rng).greedy(probe)) == [0, 2]
+
+
+# --- pipeline ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def flipped():
+    table = tomllib.loads((ROOT / "tasks" / "ip_to_flipped_ip.toml").read_text())
+    table["presets"] = {"tiny": {**TINY, "target_budgets": [100, 300], "evaluation_steps": 60}}
+    table["source_learning"]["iterations"] = 5
+    spec = spec_mod.parse_spec(table, "ip_to_flipped_ip.toml")
+    preset = spec.preset("tiny")
+    return spec, preset, pipeline.learn_source(spec, preset, 0)
+
+
+def test_reset_protocol_data_cover_the_box(flipped):
+    spec, preset, artifacts = flipped
+    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    data = problem.reset_samples(4000)
+    low, high = problem.target.reset_low, problem.target.reset_high
+    assert np.all(data.states >= low) and np.all(data.states <= high)
+    # Every cell of a 4 x 4 grid over the box holds about a sixteenth of the states.
+    cells = np.floor((data.states - low) / (high - low) * 4).clip(0, 3).astype(int)
+    counts = np.bincount(cells[:, 0] * 4 + cells[:, 1], minlength=16)
+    assert counts.min() > 4000 / 16 * 0.7
+    # Stepped by the real target: the flipped pendulum's own next states.
+    expected = sampling.step_from("pendulum", "swingup_flipped", data.states[:5], data.actions[:5])
+    np.testing.assert_allclose(data.next_states[:5], expected)
+    # Budgets nest, and a random-policy stream from hanging never comes near upright.
+    np.testing.assert_array_equal(problem.reset_samples(100).states, data.states[:100])
+    assert np.mean(np.abs(data.states[:, 0]) < 0.5) > 0.1
+    assert not np.any(np.abs(artifacts.target_stream.states[:, 0]) < 0.5)
+
+
+def test_target_transitions_count_algorithm_2s_rollouts(flipped):
+    spec, preset, artifacts = flipped
+    record = pipeline.run_method(spec, preset, 0, "ta-tl", artifacts)
+    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    # By hand: the projected source policy's episodes from Algorithm 2's own starts.
+    starts_seed = pipeline.derive_seed(0, spec.name, "algorithm2-starts")
+    _, lengths = pipeline.evaluate(spec, preset, problem.projected_source_policy(), starts_seed)
+    rollout = int(lengths.sum())
+    assert rollout == preset.evaluation_episodes * preset.evaluation_steps  # the pendulum never ends early
+    for point in record["curve"]:
+        assert point["target_transitions"] == point["samples_used"] + rollout
+    # A method without hooks counts its samples; one drawing its own data counts those.
+    rl = pipeline.run_method(spec, preset, 0, "rl", artifacts)
+    assert [p["target_transitions"] for p in rl["curve"]] == list(preset.target_budgets)
+    reset = pipeline.run_method(spec, preset, 0, "rl-reset", artifacts)
+    assert [p["target_transitions"] for p in reset["curve"]] == list(preset.target_budgets)
+    assert reset["data"] == "reset" and rl["data"] == "shared"
+
+
+def test_algorithm_2_compares_both_utilities_from_its_own_starts(flipped):
+    """With the real simulator as the 'model', U_Mhat equals U_M: same starts, same reward."""
+    spec, preset, artifacts = flipped
+    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    exact = types.SimpleNamespace(
+        predict=lambda s, a: sampling.step_values_from("pendulum", "swingup_flipped", s, np.asarray(a))
+    )
+    policy = problem.projected_source_policy()
+    u_true = problem.target_return(policy)
+    assert problem.model_return(exact, policy) == pytest.approx(u_true, rel=1e-6)
+    assert problem.utility_gap(exact) == pytest.approx(0.0, abs=1e-6 * abs(u_true))
+    # Those starts are not the evaluation's.
+    n = preset.evaluation_episodes
+    evaluation = sampling.start_states(
+        "pendulum", "swingup_flipped", n, pipeline.derive_seed(0, spec.name, "evaluation")
+    )
+    own = sampling.start_states(
+        "pendulum", "swingup_flipped", n, pipeline.derive_seed(0, spec.name, "algorithm2-starts")
+    )
+    assert not np.allclose(evaluation, own)
+
+
+def test_start_states_are_where_evaluation_starts():
+    seen = []
+
+    def policy(states):
+        if not seen:
+            seen.append(states.copy())
+        return np.zeros((len(states), 1))
+
+    for task in ("swingup", "swingup_timevarying"):  # the batched and the stepped paths
+        seen.clear()
+        sampling.evaluate("pendulum", task, policy, 3, 11, max_episode_steps=2)
+        np.testing.assert_array_equal(seen[0], sampling.start_states("pendulum", task, 3, 11))
+
+
+def test_online_fqi_reaches_what_random_data_never_do(flipped):
+    """From hanging, random-policy episodes never come near upright; epsilon-greedy
+    episodes of the refitted policy do, and its policy beats the shared-stream RL's."""
+    spec, preset, artifacts = flipped
+    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    collected = []
+
+    def recording(policy, n, round_):
+        data = problem.episode_samples(policy, n, round_)
+        collected.append(data)
+        return data
+
+    stream = pipeline.collect(spec.target, 3000, 5)  # the random-policy data of the same size
+    method = RL(**spec.methods["rl"], data="online", online_batch=200)
+    online = method.learn(dataclasses.replace(problem, episode_samples=recording), stream)
+    assert [len(c) for c in collected] == [200, 200, 400, 800, 1400]
+    assert not np.any(np.abs(collected[0].states[:, 0]) < 0.5)  # the random first batch
+    assert np.any(np.abs(np.concatenate([c.states for c in collected[1:]])[:, 0]) < 0.5)
+    assert not np.any(np.abs(stream.states[:, 0]) < 0.5)
+    shared = RL(**spec.methods["rl"]).learn(problem, stream)
+    seed = pipeline.derive_seed(0, spec.name, "evaluation")
+    assert (
+        pipeline.evaluate(spec, preset, online, seed)[0].mean()
+        > pipeline.evaluate(spec, preset, shared, seed)[0].mean()
+    )
+
+
+def test_the_source_action_is_chosen_where_the_source_is_queried(flipped):
+    spec, preset, artifacts = flipped
+    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    far = np.array([[0.5, 30.0], [-2.0, -25.0]])  # faster than the source's FQI box (+-8 rad/s)
+    mapped = problem.mapping.chi_plus(far)
+    np.testing.assert_allclose(mapped, [[0.5, 8.0], [-2.0, -8.0]])
+
+
+# --- specs and reports ---------------------------------------------------------------
+
+
+SPECS = sorted((ROOT / "tasks").glob("*.toml")) + sorted((ROOT / "tasks" / "variants").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SPECS, ids=lambda p: p.stem)
+def test_every_spec_lists_the_fair_baselines_and_ablations(path):
+    spec = spec_mod.load_spec(path)
+    methods = spec.methods
+    assert {"rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior"} <= set(methods)
+    if spec.target.domain == "gridworld":
+        assert ("ta-tl", "replan-no-source") in summary.ablation_pairs(methods)
+        return
+    assert ("ta-tl", "apprentice-fqi") in summary.ablation_pairs(methods)
+    # The ablation fits ta-tl's own apprentice, and learns with the RL baseline's settings.
+    assert methods["apprentice-fqi"]["apprentice"] == methods["ta-tl"]["apprentice"]
+    for key, value in methods["rl"].items():
+        assert methods["apprentice-fqi"][key] == value
+        for name in ("rl-reset", "rl-online"):
+            assert methods[name][key] == value
+    assert methods["ta-tl-continuous"] == {**methods["ta-tl"], "method": "ta-tl", "actions": "continuous"}
+
+
+def test_new_methods_are_registered_and_source_free_where_they_say():
+    for name in ("apprentice-fqi", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior"):
+        assert registry.build(name).name == name
+    assert registry.build("rl-online").data == "online" and registry.build("uma-tl-reset").data == "reset"
+    assert "apprentice-fqi" in registry.SOURCE_FREE and "uma-tl-prior" not in registry.SOURCE_FREE
+    with pytest.raises(ValueError, match=r"RL.data is 'replay'; valid choices: \['shared', 'reset', 'online'\]"):
+        RL(data="replay")
