@@ -42,9 +42,10 @@ Seeding: ``collect``/``evaluate`` with ``seed`` draw start states from the
 successive resets of the task created with ``task_kwargs["random"] = seed``.
 ``collect``'s random actions and their controls' noise are each episode's own
 draws from ``np.random.default_rng(seed)`` and generators derived from it;
-with a policy, and in ``evaluate``, the task's ``random`` feeds
-``Task.controls`` (rider noise) in lockstep order. Without control noise, a
-collection is exactly a plain loop over that environment with its actions.
+so is ``evaluate``'s controls' noise (:func:`_evaluation_randoms`). In
+``collect`` with a policy, the task's ``random`` feeds ``Task.controls`` (rider
+noise) in lockstep order. Without control noise, a collection is exactly a
+plain loop over that environment with its actions.
 """
 
 from __future__ import annotations
@@ -925,6 +926,13 @@ def evaluate(
     All episodes run in lockstep from the task's start distribution (the
     successive resets of the task seeded with ``seed``); ``policy`` maps the
     (N, d) states of the live episodes to (N, action_dim) action values.
+
+    The noise the task's controls draw (the bicycle's rider) is each episode's
+    own: episode i's controls draw from its own Generator
+    (:func:`_evaluation_randoms`), one call a step, so the noise of its step t
+    depends on ``seed``, i and t alone, not on which other episodes still run:
+    methods evaluated with one seed see common random numbers. Controls without
+    noise draw nothing (``random=None``), one call for all live episodes.
     """
     n_episodes = _check_count("n_episodes", n_episodes, 1)
     if max_episode_steps is not None:
@@ -937,6 +945,7 @@ def evaluate(
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
     with sim.seeded_env(seed) as env:
         task_obj = env.task
+        randoms = _evaluation_randoms(seed, n_episodes) if task_obj.control_noise else None
         batch = sim.new_batch(n_episodes)
         live = np.arange(n_episodes)
         states = sim.start_episodes(batch, live, env)
@@ -944,7 +953,12 @@ def evaluate(
         lengths = np.zeros(n_episodes, np.int64)
         while len(live):
             values = _check_values(policy(states), len(live), sim)
-            controls = task_obj.controls(values, task_obj.random)
+            if randoms is None:
+                controls = task_obj.controls(values, None)
+            else:
+                controls = np.concatenate(
+                    [task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)]
+                )
             next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
             rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
             returns[live] += rewards
@@ -954,6 +968,17 @@ def evaluate(
     return returns, lengths
 
 
+def _evaluation_randoms(seed: int, n_episodes: int) -> list[np.random.Generator]:
+    """Each evaluation episode's Generator for its controls' noise.
+
+    Episode i's is child i of ``SeedSequence(seed)``'s second child (collect()'s
+    noise starts from the first), whatever ``n_episodes``: its stream depends on
+    the seed and its number only, and is apart from collect()'s with the same seed.
+    """
+    parent = np.random.SeedSequence(seed, spawn_key=(1,))
+    return [np.random.default_rng(child) for child in parent.spawn(n_episodes)]
+
+
 def _evaluate_env(
     sim: _Simulator,
     policy: ValuePolicy,
@@ -961,7 +986,8 @@ def _evaluate_env(
     seed: int,
     max_episode_steps: int | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Lockstep over one environment per episode, seeded ``(seed, i)``."""
+    """Lockstep over one environment per episode, seeded ``(seed, i)``: its start
+    and any noise are episode i's own, as on the batched path (from another stream)."""
     envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
     states = np.stack([_observed_state(e.reset()) for e in envs])
     returns = np.zeros(n_episodes)

@@ -412,6 +412,111 @@ def test_evaluate_matches_environment_returns(domain, task):
         assert (total, steps) == (returns[i], lengths[i])
 
 
+def steer_into_lean(gain):
+    """A bicycle policy (torque from roll and roll rate): low gains fall, at varied times."""
+    return lambda s: np.clip(gain * (s[:, 2:3] + 0.25 * s[:, 3:4]), -2.0, 2.0)
+
+
+def evaluated_noise(monkeypatch, policy, n_episodes, seed, max_episode_steps):
+    """evaluate() on the noisy bicycle: (returns, lengths, each episode's CG offsets by step).
+
+    Rows of the controls calls come in lockstep order (live episodes in order, step
+    after step), so the lengths say which episode each row is.
+    """
+    from tatl_mj.suite import bicycle
+
+    rows = []
+    controls = bicycle.Task.controls
+
+    def recorded(self, values, random):
+        ctrl = controls(self, values, random)
+        rows.append(ctrl[:, 1].copy())
+        return ctrl
+
+    with monkeypatch.context() as patch:
+        patch.setattr(bicycle.Task, "controls", recorded)
+        returns, lengths = sampling.evaluate(
+            "bicycle", "balance", policy, n_episodes, seed, max_episode_steps=max_episode_steps
+        )
+    offsets = np.concatenate(rows)
+    assert len(offsets) == lengths.sum()
+    per_step = np.split(offsets, np.cumsum([(lengths > t).sum() for t in range(lengths.max())])[:-1])
+    noise = [
+        np.array([step[(lengths[:i] > t).sum()] for t, step in enumerate(per_step[: lengths[i]])])
+        for i in range(n_episodes)
+    ]
+    return returns, lengths, noise
+
+
+def test_evaluation_rider_noise_is_each_episodes_own(monkeypatch):
+    # Common random numbers: two policies evaluated with one seed give every episode
+    # the same rider noise at every step both are alive, though their episodes end at
+    # different times; known answer, episode i's stream is child i of
+    # SeedSequence(seed)'s second child (sampling._evaluation_randoms).
+    seed, n, cg_noise = 3, 6, suite.bicycle.DEFAULT_CG_NOISE
+    _, weak, weak_noise = evaluated_noise(monkeypatch, steer_into_lean(4.0), n, seed, 300)
+    _, strong, strong_noise = evaluated_noise(monkeypatch, steer_into_lean(12.0), n, seed, 300)
+    assert len(set(weak)) > 2 and not np.array_equal(weak, strong)  # episodes end apart
+    for i in range(n):
+        both = min(weak[i], strong[i])
+        np.testing.assert_array_equal(weak_noise[i][:both], strong_noise[i][:both], err_msg=f"episode {i}")
+        stream = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(1, i)))
+        expected = stream.uniform(-cg_noise, cg_noise, size=max(weak[i], strong[i]))
+        np.testing.assert_array_equal(weak_noise[i], expected[: weak[i]], err_msg=f"episode {i}")
+        np.testing.assert_array_equal(strong_noise[i], expected[: strong[i]], err_msg=f"episode {i}")
+
+
+def test_an_evaluation_episode_does_not_depend_on_the_batch(monkeypatch):
+    # Episode 0 starts from the same first reset alone or with 4 more episodes (some
+    # of which fall before it): its noise, states, return and length are the same.
+    seeing = []
+
+    def policy(states):
+        seeing.append(states[0].copy())  # episode 0 is the first row while it lives
+        return steer_into_lean(6.0)(states)
+
+    alone = evaluated_noise(monkeypatch, policy, 1, 11, 400)
+    states_alone, seeing[:] = np.array(seeing), []
+    batch = evaluated_noise(monkeypatch, policy, 5, 11, 400)
+    lengths = batch[1]
+    assert lengths.min() < lengths[0] < 400  # others end before episode 0, which falls
+    assert (alone[0][0], alone[1][0]) == (batch[0][0], lengths[0])
+    np.testing.assert_array_equal(alone[2][0], batch[2][0])
+    np.testing.assert_array_equal(states_alone, np.array(seeing)[: lengths[0]])
+
+
+@pytest.mark.parametrize("domain,task", BATCHED_TASKS)
+def test_evaluation_without_noise_draws_nothing_and_is_the_environment_loop(domain, task, monkeypatch):
+    # Without control noise, evaluate() is what it was: one controls call a step for all
+    # live episodes, with random=None (nothing drawn), and each episode the environment
+    # loop over the successive resets of the task seeded with the seed.
+    kwargs = QUIET.get((domain, task))
+    env = suite.load(domain, task, task_kwargs={**(kwargs or {}), "random": 9})
+    actions = np.asarray(suite.action_set(domain), np.float64)
+
+    def policy(states):  # varied, deterministic actions: episodes end at different times
+        return actions[(np.abs(np.floor(37.0 * states.sum(axis=1))) % len(actions)).astype(int)]
+
+    randoms = []
+    controls = type(env.task).controls
+
+    def recorded(self, values, random):
+        randoms.append(random)
+        return controls(self, values, random)
+
+    monkeypatch.setattr(type(env.task), "controls", recorded)
+    monkeypatch.setattr(type(env.task), "control_noise", False)  # as before the override
+    returns, lengths = sampling.evaluate(domain, task, policy, 5, seed=9, task_kwargs=kwargs, max_episode_steps=150)
+    assert len(randoms) == lengths.max() and all(r is None for r in randoms)
+    for i in range(5):
+        timestep, total, steps = env.reset(), 0.0, 0
+        while not timestep.last() and steps < 150:
+            timestep = env.step(policy(timestep.observation["state"][None])[0])
+            total += timestep.reward
+            steps += 1
+        assert (total, steps) == (returns[i], lengths[i]), i
+
+
 def test_memory_is_contiguous_arrays():
     tracemalloc.start()
     tr = sampling.collect("cartpole", "balance", 100_000, seed=0, n_parallel=512)
