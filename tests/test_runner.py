@@ -21,7 +21,7 @@ def test_local_run_writes_records_and_summary(tmp_path):
     spec = tiny_spec()
     summary = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
     exp = summary["experiments"]["ip_to_flipped_ip"]
-    assert set(exp["methods"]) == {"ta-tl", "uma-tl", "rl"}
+    assert set(exp["methods"]) == set(spec.methods) >= {"ta-tl", "uma-tl", "rl", "apprentice-fqi", "rl-online"}
     for method in exp["methods"].values():
         assert method["curve"]["samples"] == [40, 120]
         assert len(method["final_return"]) == len(method["samples_to_threshold"]) == 1

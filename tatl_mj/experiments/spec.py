@@ -82,9 +82,10 @@ class MappingSpec:
 
     ``identity`` (same state space); ``manifold_alignment`` (the paper's: learned
     without supervision from random-policy states; ``n_neighbors``, ``mu``);
-    ``transition_alignment`` (Ammar et al.'s (s, a, s') triplets with the
-    dynamics-consistent choice of map; settings in ``transition``, see
-    ``alignment.TransitionAlignment``); or ``affine``: a hand-coded
+    ``transition_alignment`` (this project's own: candidate state maps chosen
+    by how well they explain the target's (s, a, s') transitions, dynamics
+    consistency, in the spirit of Ammar et al.'s triplets but not their method;
+    settings in ``transition``, see ``alignment.TransitionAlignment``); or ``affine``: a hand-coded
     chi(s_S) = matrix s_S + offset, ``matrix`` as rows (dT rows of dS numbers),
     optional ``offset`` (dT).
 

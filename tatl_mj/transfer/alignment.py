@@ -26,8 +26,10 @@ transfer by Ammar et al. 2015). :func:`align_manifolds` implements it in three s
    least squares where the dimensions differ), wrapped in the standardisations.
 
 :func:`align_transitions` is an optional, transition-aware variant (see its
-docstring): it uses (s, a, s') triplets, as Ammar et al. (2015) do, to fix the
-sign/permutation ambiguities that state samples alone leave open.
+docstring), this project's own method, not Ammar et al.'s: Ammar et al. (2015)
+align (s, a, s') triplets in one embedding; here candidate state maps (the sign
+and permutation ambiguities that state samples alone leave open) are scored by
+how well each explains the target's one-step motion (dynamics consistency).
 
 Same-domain experiments use :class:`IdentityMapping`; a known affine map is an
 :class:`AffineMapping`. All three satisfy the :class:`Mapping` protocol.
