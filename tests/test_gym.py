@@ -1,5 +1,7 @@
 """Gymnasium ids for every physics task: registration, env_checker, and agreement with the dm_env task."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -28,6 +30,72 @@ def test_passes_gymnasium_env_checker(env_id):
     env.close()
 
 
+@pytest.mark.parametrize("env_id", IDS)
+def test_every_id_runs_without_a_warning(env_id):
+    # gymnasium.make (its PassiveEnvChecker included), reset, step, render and check_env, with
+    # any warning an error: the render modes are declared where make reads them, the spaces are
+    # bounded and the action space normalised.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gymnasium.make(env_id, render_mode="rgb_array", width=32, height=24)
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        assert env.render().shape == (24, 32, 3)
+        check_env(env.unwrapped)
+        env.close()
+        plain = gymnasium.make(env_id)  # check_env then makes one per declared render mode
+        check_env(plain.unwrapped, skip_render_check=False)
+        plain.close()
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (
+            np.zeros(3),
+            r"action must have shape \(1,\) \(the action space Box\(-1.0, 1.0, \(1,\), float64\)\), got shape \(3,\)",
+        ),
+        (0.5, r"must have shape \(1,\) \(the action space Box.*got shape \(\)"),
+        (np.zeros((1, 1)), r"must have shape \(1,\) \(the action space Box.*got shape \(1, 1\)"),
+        (np.array([1.5]), r"action \[1.5\] is outside the action space Box\(-1.0, 1.0, \(1,\), float64\)"),
+        (np.array([np.nan]), r"action \[nan\] is outside the action space Box"),
+        ("left", r"action must be an array in the action space Box"),
+    ],
+    ids=["size-3", "scalar", "batched", "out-of-range", "nan", "text"],
+)
+def test_bad_actions_raise_value_errors_naming_the_action_space(action, message):
+    env = gymnasium.make("tatl_mj/CartpoleBalance-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        env.step(action)
+    env.step(np.array([1.0]))  # the bounds themselves are in the space
+    env.step(np.float32([-1.0]))
+
+
+def test_actions_are_fractions_of_the_actuator_limit_unless_asked_otherwise():
+    env = gymnasium.make("tatl_mj/CartpoleBalance-v0")
+    assert env.action_space.low[0] == -1.0 and env.action_space.high[0] == 1.0
+    assert env.unwrapped.actuator_limit[0] == 20.0
+    raw = gymnasium.make("tatl_mj/CartpoleBalance-v0", normalize_actions=False)
+    assert raw.action_space.low[0] == -20.0 and raw.action_space.high[0] == 20.0
+    for e in (env, raw):
+        e.reset(seed=1)
+    np.testing.assert_array_equal(env.step(np.array([0.5]))[0], raw.step(np.array([10.0]))[0])
+    with pytest.raises(ValueError, match=r"outside the action space Box\(-20.0, 20.0"):
+        raw.step(np.array([25.0]))
+
+
+def test_renders_from_the_camera_the_domain_declares():
+    from tatl_mj.suite import bicycle
+
+    env = gymnasium.make("tatl_mj/BicycleBalance-v0", render_mode="rgb_array", width=32, height=24)
+    assert bicycle.CAMERA == "behind" and env.unwrapped._camera == "behind"
+    side = gymnasium.make("tatl_mj/BicycleBalance-v0", render_mode="rgb_array", width=32, height=24, camera="tracking")
+    for e in (env, side):
+        e.reset(seed=0)
+    assert np.any(env.render() != side.render())
+
+
 def test_steps_match_the_dm_env_task_and_end_as_it_does():
     # Cart-pole pushed right at full force: the same rewards and states as suite.load, and the
     # toppled pole is a terminal state (terminated, not truncated).
@@ -37,10 +105,10 @@ def test_steps_match_the_dm_env_task_and_end_as_it_does():
     timestep = dm.reset()
     np.testing.assert_array_equal(observation, timestep.observation["state"])
     high = env.action_space.high
-    assert high[0] == 20.0 and env.action_space.low[0] == -20.0
+    assert high[0] == 1.0 and env.action_space.low[0] == -1.0  # fractions of the 20 N limit
     for _ in range(200):
         observation, reward, terminated, truncated, _ = env.step(high)
-        timestep = dm.step(high)
+        timestep = dm.step(20.0 * high)
         np.testing.assert_array_equal(observation, timestep.observation["state"])
         assert reward == timestep.reward
         if terminated or truncated:
