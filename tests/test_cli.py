@@ -186,3 +186,32 @@ def test_every_option_and_subcommand_has_help_text():
             assert action.help not in (None, argparse.SUPPRESS) and action.help.strip(), f"{command} {label}: no help"
         parser.format_help()  # every help string formats (e.g. no stray % signs)
     assert names == ["tatl", "tatl list", "tatl run", "tatl plot", "tatl render", "tatl bench"]
+
+
+def test_run_with_an_unknown_method_says_so_in_one_line(tmp_path, capsys):
+    # A typo in --methods: one line naming it and the methods the spec lists, no traceback, no work.
+    out = tmp_path / "out"
+    code = cli.main(
+        [
+            "run",
+            "tasks/ip_to_flipped_ip.toml",
+            "--methods",
+            "ta-tl,ta-tl-replann",
+            "--seeds",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("tatl run: --methods: unknown method 'ta-tl-replann' for ip_to_flipped_ip; ")
+    assert "valid methods: ['ta-tl', 'uma-tl', 'rl']" in err
+    assert not out.exists()
+    # With two specs, a variant one of them lists: the other is named, with the methods it lists.
+    specs = ["tasks/cartpole_to_bicycle.toml", "tasks/ip_to_flipped_ip.toml"]
+    code = cli.main(["run", *specs, "--methods", "rl,ta-tl-h-no-cart", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and not out.exists(), err
+    assert "unknown method 'ta-tl-h-no-cart' for ip_to_flipped_ip; valid methods: ['ta-tl', 'uma-tl', 'rl']" in err
