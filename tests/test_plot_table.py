@@ -146,3 +146,28 @@ def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
     ) in table
     del result["experiments"]["toy"]["spec"]["methods"]
     assert "ablation without the source" not in plot.table(result)
+
+
+@pytest.mark.parametrize("meaningful", [True, False], ids=["threshold", "no-threshold"])
+def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, monkeypatch, meaningful):
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
+    )
+    exp = experiment({"ta-tl": [100, 1000], "rl": [None, 10000]} if meaningful else {"ta-tl": [None], "rl": [None]})
+    if not meaningful:
+        exp["random_returns"] = [50.0]
+    plot.figure("toy", exp, tmp_path / "toy.png")
+    (fig,) = drawn
+    curve, length = fig.axes
+    assert curve.get_ylabel() == "return (undiscounted episode sum)"
+    assert "average" not in curve.get_title()
+    if meaningful:
+        assert length.get_ylabel() == "target samples to threshold"
+        assert length.get_title() == "(b) target samples to threshold"
+    else:
+        assert length.get_ylabel() == "final return (undiscounted episode sum)"
+        assert length.get_title().startswith("(b) final return")
