@@ -124,6 +124,9 @@ def _run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 128 + stop.signum
+    except runner.MethodError as error:  # raised before any work starts
+        print(f"tatl run: --methods: {error}", file=sys.stderr)
+        return 2
     except lock.LockHeld as error:
         print(f"tatl run: {error}", file=sys.stderr)
         return 2
@@ -253,7 +256,10 @@ def _non_empty(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from tatl_mj import __version__  # imports neither mujoco nor dm_control
+
     parser = argparse.ArgumentParser(prog="tatl", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}", help="print the version")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("list", help="list the suite's tasks")
@@ -265,10 +271,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("specs", nargs="+", help="experiment specs, e.g. tasks/*.toml")
     p.add_argument("--preset", default="smoke", help="named budget preset in the specs (default: smoke)")
     p.add_argument("--seeds", type=_int_at_least(1), default=2, help="number of seeds, >= 1 (default: 2)")
-    p.add_argument("--first-seed", type=_int_at_least(0), default=0)
+    p.add_argument(
+        "--first-seed",
+        type=_int_at_least(0),
+        default=0,
+        help="seeds run are FIRST_SEED .. FIRST_SEED + SEEDS - 1, >= 0 (default: 0)",
+    )
     p.add_argument("--out", type=_non_empty, required=True, help="output folder; rerunning resumes it")
     p.add_argument("--workers", type=_int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")
-    p.add_argument("--executor", choices=("local", "ray"), default="local")
+    p.add_argument(
+        "--executor",
+        choices=("local", "ray"),
+        default="local",
+        help="local: a process pool on this machine; ray: a Ray cluster (default: local)",
+    )
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     p.add_argument(
         "--methods",
@@ -278,18 +294,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
 
     p = sub.add_parser("plot", help="figures and results table of a finished run")
-    p.add_argument("dir")
+    p.add_argument("dir", help="a `tatl run` output folder (its --out)")
     p.set_defaults(func=_plot)
 
     p = sub.add_parser("render", help="render a clip of a method's policy on the target task")
-    p.add_argument("spec")
+    p.add_argument("spec", help="experiment spec, e.g. tasks/ip_to_flipped_ip.toml")
     p.add_argument("--method", default="ta-tl", help="a method the spec lists, or random (default: ta-tl)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="the run seed whose policy is filmed (default: 0)")
     p.add_argument("--out", required=True, help="clip path, .mp4 or .gif")
-    p.add_argument("--seconds", type=float, default=5.0)
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
-    p.add_argument("--fps", type=int, default=30)
+    p.add_argument("--seconds", type=float, default=5.0, help="clip length in simulated seconds (default: 5)")
+    p.add_argument("--width", type=int, default=640, help="panel width in pixels (default: 640)")
+    p.add_argument("--height", type=int, default=480, help="panel height in pixels (default: 480)")
+    p.add_argument("--fps", type=int, default=30, help="clip frames per second (default: 30)")
     p.add_argument("--preset", default="smoke", help="budgets used when training is needed")
     p.add_argument("--run-dir", default=None, help="reuse a finished `tatl run` output folder")
     p.add_argument("--with-source", action="store_true", help="show the source system side by side")

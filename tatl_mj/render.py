@@ -14,8 +14,10 @@ How a clip is made
     drawn only when one is due (clip time ``k / fps``), showing the state after
     the last step at or before that time. Nothing here runs unless a clip is
     asked for, so simulation and training are never slowed by rendering.
-  - MuJoCo tasks are drawn with ``mujoco.Renderer`` from the model's camera
-    (``"tracking"`` by default, which follows the system); a task without a
+  - MuJoCo tasks are drawn with ``mujoco.Renderer`` from a camera of the model:
+    by default the one the task's domain declares (:func:`default_camera`, the
+    ``CAMERA`` of its suite module: the bicycle from behind, where its roll
+    shows; cart-pole, pendulum and mountain car side-on); a task without a
     MuJoCo model draws itself (its ``painter``, numpy and Pillow).
   - Overlay (top left, small): episode time, method label, running return and
     episode number.
@@ -40,6 +42,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -57,6 +60,19 @@ END_MODES: tuple[str, ...] = ("reset", "stop")
 END_HOLD_SECONDS = 0.5  # how long the end of an episode stays on screen
 CLIP_EXTENSIONS: tuple[str, ...] = (".mp4", ".gif")
 UNTIMED_STEP_SECONDS = 0.25  # steps without a duration (no physics): show four per second
+DEFAULT_CAMERA = "tracking"  # for a model whose domain declares no CAMERA
+
+
+def default_camera(env: Any) -> str:
+    """The camera clips of ``env`` are filmed from: the one its domain shows best.
+
+    A domain declares it as ``CAMERA`` in the module that defines its physics
+    class (``tatl_mj.suite.bicycle.CAMERA == "behind"``); without one (e.g. a
+    dm_control task) it is ``DEFAULT_CAMERA``.
+    """
+    physics = getattr(env, "physics", None)
+    module = sys.modules.get(type(physics).__module__) if physics is not None else None
+    return str(getattr(module, "CAMERA", DEFAULT_CAMERA))
 
 
 def render_episode(
@@ -68,7 +84,7 @@ def render_episode(
     height: int = 480,
     fps: float = 30,
     method_label: str = "",
-    camera: str = "tracking",
+    camera: str | None = None,
     source: SourceSpec | None = None,
     on_end: str = "reset",
 ) -> np.ndarray:
@@ -87,7 +103,8 @@ def render_episode(
         offscreen buffer, 1280x960 for tatl-mj models).
       fps: frames per second of the clip.
       method_label: shown in the overlay, e.g. ``"ta-tl"``.
-      camera: the model's camera to film from.
+      camera: the model's camera to film from (for both panels); None: each
+        panel's :func:`default_camera`.
       source: ``(source_env, source_state_fn)`` to show the source system, put in
         the mapped state ``source_state_fn(target_state)`` (a ``(d,)`` state to a
         ``(d_s,)`` state), to the right of the target; the frames are then
@@ -128,7 +145,7 @@ def iter_frames(
     height: int = 480,
     fps: float = 30,
     method_label: str = "",
-    camera: str = "tracking",
+    camera: str | None = None,
     source: SourceSpec | None = None,
     on_end: str = "reset",
 ) -> Iterator[np.ndarray]:
@@ -147,12 +164,14 @@ def iter_frames(
 
     step_seconds = _step_seconds(env)
     with contextlib.ExitStack() as stack:
-        paint, _ = _painter(env, width, height, camera, stack)
+        paint, _ = _painter(env, width, height, default_camera(env) if camera is None else camera, stack)
         show_source = None
         if source is not None:
             source_env, source_state_fn = source
             source_env.reset()
-            _, show_source = _painter(source_env, width, height, camera, stack)
+            _, show_source = _painter(
+                source_env, width, height, default_camera(source_env) if camera is None else camera, stack
+            )
         target_name = _domain_name(env)
         source_name = None if source is None else _domain_name(source[0])
 

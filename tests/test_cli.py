@@ -1,10 +1,15 @@
 """The `tatl` command end to end, as a user runs it (subprocesses, tiny budgets)."""
 
+import argparse
 import json
+import tomllib
 
 import imageio.v3 as iio
 import numpy as np
+import pytest
 from conftest import ROOT, tatl, write_tiny
+
+from tatl_mj import cli
 
 
 def test_list_prints_every_task():
@@ -149,3 +154,67 @@ def test_render_with_no_working_backend_says_how_to_fix(tmp_path):
     assert done.returncode == 1
     assert "MUJOCO_GL" in done.stderr and "Traceback" not in done.stderr
     assert not (tmp_path / "x.mp4").exists()
+
+
+def _parsers():
+    """(name, parser) for `tatl` and each of its subcommands."""
+    parser = cli.build_parser()
+    yield "tatl", parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield f"tatl {name}", sub
+
+
+def test_version_prints_the_package_version(capsys):
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["--version"])
+    assert stop.value.code == 0
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert capsys.readouterr().out.strip() == f"tatl {version}"
+
+
+def test_every_option_and_subcommand_has_help_text():
+    names = []
+    for command, parser in _parsers():
+        names.append(command)
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                missing = [c.dest for c in action._choices_actions if not (c.help or "").strip()]
+                assert not missing, f"{command}: subcommands without help: {missing}"
+                continue
+            label = "/".join(action.option_strings) or action.dest
+            assert action.help not in (None, argparse.SUPPRESS) and action.help.strip(), f"{command} {label}: no help"
+        parser.format_help()  # every help string formats (e.g. no stray % signs)
+    assert names == ["tatl", "tatl list", "tatl run", "tatl plot", "tatl render", "tatl bench"]
+
+
+def test_run_with_an_unknown_method_says_so_in_one_line(tmp_path, capsys):
+    # A typo in --methods: one line naming it and the methods the spec lists, no traceback, no work.
+    out = tmp_path / "out"
+    code = cli.main(
+        [
+            "run",
+            "tasks/ip_to_flipped_ip.toml",
+            "--methods",
+            "ta-tl,ta-tl-replann",
+            "--seeds",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("tatl run: --methods: unknown method 'ta-tl-replann' for ip_to_flipped_ip; ")
+    from tatl_mj.experiments.spec import load_spec
+
+    assert f"valid methods: {list(load_spec('tasks/ip_to_flipped_ip.toml').methods)}" in err
+    assert not out.exists()
+    # With two specs, a variant one of them lists: the other is named, with the methods it lists.
+    specs = ["tasks/cartpole_to_bicycle.toml", "tasks/ip_to_flipped_ip.toml"]
+    code = cli.main(["run", *specs, "--methods", "rl,ta-tl-h-no-cart", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and not out.exists(), err
+    assert "unknown method 'ta-tl-h-no-cart' for ip_to_flipped_ip; valid methods: ['ta-tl', 'uma-tl', 'rl', " in err

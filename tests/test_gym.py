@@ -1,5 +1,7 @@
 """Gymnasium ids for every physics task: registration, env_checker, and agreement with the dm_env task."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ IDS = sorted(tatl_gym.GYM_IDS)
 
 def test_every_physics_task_has_an_id():
     assert set(tatl_gym.GYM_IDS.values()) == {(d, t) for d, t in suite.ALL_TASKS if d != "gridworld"}
-    assert "tatl_mj/BicycleBalance-v0" in IDS and "tatl_mj/PendulumSwingupFlipped-v0" in IDS
+    assert "tatl_mj/BicycleBalance-v1" in IDS and "tatl_mj/PendulumSwingupFlipped-v1" in IDS
     assert all(i in gymnasium.registry for i in IDS)
 
 
@@ -28,19 +30,86 @@ def test_passes_gymnasium_env_checker(env_id):
     env.close()
 
 
+@pytest.mark.parametrize("env_id", IDS)
+def test_every_id_runs_without_a_warning(env_id):
+    # gymnasium.make (its PassiveEnvChecker included), reset, step, render and check_env, with
+    # any warning an error: the render modes are declared where make reads them, the spaces are
+    # bounded and the action space normalised.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gymnasium.make(env_id, render_mode="rgb_array", width=32, height=24)
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        assert env.render().shape == (24, 32, 3)
+        check_env(env.unwrapped)
+        env.close()
+        plain = gymnasium.make(env_id)  # check_env then makes one per declared render mode
+        check_env(plain.unwrapped, skip_render_check=False)
+        plain.close()
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (
+            np.zeros(3),
+            r"action must have shape \(1,\) \(the action space Box\(-1.0, 1.0, \(1,\), float64\)\), got shape \(3,\)",
+        ),
+        (0.5, r"must have shape \(1,\) \(the action space Box.*got shape \(\)"),
+        (np.zeros((1, 1)), r"must have shape \(1,\) \(the action space Box.*got shape \(1, 1\)"),
+        (np.array([np.nan]), r"action \[nan\] is not finite \(the action space is Box"),
+        ("left", r"action must be an array in the action space Box"),
+    ],
+    ids=["size-3", "scalar", "batched", "nan", "text"],
+)
+def test_bad_actions_raise_value_errors_naming_the_action_space(action, message):
+    env = gymnasium.make("tatl_mj/CartpoleBalance-v1")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        env.step(action)
+    env.step(np.array([1.0]))  # the bounds themselves are in the space
+    env.step(np.float32([-1.0]))
+
+
+def test_actions_are_fractions_of_the_actuator_limit_unless_asked_otherwise():
+    env = gymnasium.make("tatl_mj/CartpoleBalance-v1")
+    assert env.action_space.low[0] == -1.0 and env.action_space.high[0] == 1.0
+    assert env.unwrapped.actuator_limit[0] == 20.0
+    raw = gymnasium.make("tatl_mj/CartpoleBalance-v1", normalize_actions=False)
+    assert raw.action_space.low[0] == -20.0 and raw.action_space.high[0] == 20.0
+    for e in (env, raw):
+        e.reset(seed=1)
+    np.testing.assert_array_equal(env.step(np.array([0.5]))[0], raw.step(np.array([10.0]))[0])
+    # Beyond the space is clipped to it, as the actuator would.
+    for e in (env, raw):
+        e.reset(seed=2)
+    np.testing.assert_array_equal(raw.step(np.array([25.0]))[0], env.step(np.array([1.0]))[0])
+
+
+def test_renders_from_the_camera_the_domain_declares():
+    from tatl_mj.suite import bicycle
+
+    env = gymnasium.make("tatl_mj/BicycleBalance-v1", render_mode="rgb_array", width=32, height=24)
+    assert bicycle.CAMERA == "behind" and env.unwrapped._camera == "behind"
+    side = gymnasium.make("tatl_mj/BicycleBalance-v1", render_mode="rgb_array", width=32, height=24, camera="tracking")
+    for e in (env, side):
+        e.reset(seed=0)
+    assert np.any(env.render() != side.render())
+
+
 def test_steps_match_the_dm_env_task_and_end_as_it_does():
     # Cart-pole pushed right at full force: the same rewards and states as suite.load, and the
     # toppled pole is a terminal state (terminated, not truncated).
-    env = gymnasium.make("tatl_mj/CartpoleBalance-v0")
+    env = gymnasium.make("tatl_mj/CartpoleBalance-v1")
     observation, _ = env.reset(seed=3)
     dm = suite.load("cartpole", "balance", task_kwargs={"random": 3})
     timestep = dm.reset()
     np.testing.assert_array_equal(observation, timestep.observation["state"])
     high = env.action_space.high
-    assert high[0] == 20.0 and env.action_space.low[0] == -20.0
+    assert high[0] == 1.0 and env.action_space.low[0] == -1.0  # fractions of the 20 N limit
     for _ in range(200):
         observation, reward, terminated, truncated, _ = env.step(high)
-        timestep = dm.step(high)
+        timestep = dm.step(20.0 * high)
         np.testing.assert_array_equal(observation, timestep.observation["state"])
         assert reward == timestep.reward
         if terminated or truncated:
@@ -49,7 +118,7 @@ def test_steps_match_the_dm_env_task_and_end_as_it_does():
 
 
 def test_time_limit_truncates():
-    env = gymnasium.make("tatl_mj/PendulumSwingup-v0", task_kwargs={"time_limit": 0.5})
+    env = gymnasium.make("tatl_mj/PendulumSwingup-v1", task_kwargs={"time_limit": 0.5})
     env.reset(seed=0)
     ends = [env.step(np.zeros(1))[2:4] for _ in range(10)]  # 0.05 s steps
     assert ends[-1] == (False, True) and all(e == (False, False) for e in ends[:-1])

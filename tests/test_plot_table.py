@@ -141,8 +141,33 @@ def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
     assert "Transfer against its ablation without the source:" in table
     assert (
         "- `ta-tl-replan` vs `replan-no-source`: mean final return 10 vs 10 (higher on 0, lower on 0 of 3 seeds); "
-        "median target samples to threshold 100 vs 10,000 (fewer on 3, more on 0 of 3 seeds): "
+        "median target transitions to threshold 100 vs 10,000 (fewer on 3, more on 0 of 3 seeds): "
         "`ta-tl-replan` **beats** its source-free ablation"
     ) in table
     del result["experiments"]["toy"]["spec"]["methods"]
     assert "ablation without the source" not in plot.table(result)
+
+
+@pytest.mark.parametrize("meaningful", [True, False], ids=["threshold", "no-threshold"])
+def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, monkeypatch, meaningful):
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
+    )
+    exp = experiment({"ta-tl": [100, 1000], "rl": [None, 10000]} if meaningful else {"ta-tl": [None], "rl": [None]})
+    if not meaningful:
+        exp["random_returns"] = [50.0]
+    plot.figure("toy", exp, tmp_path / "toy.png")
+    (fig,) = drawn
+    curve, length = fig.axes
+    assert curve.get_ylabel() == "return (undiscounted episode sum)"
+    assert "average" not in curve.get_title()
+    if meaningful:
+        assert length.get_ylabel() == "target transitions to threshold"
+        assert length.get_title() == "(b) target transitions to threshold"
+    else:
+        assert length.get_ylabel() == "final return (undiscounted episode sum)"
+        assert length.get_title().startswith("(b) final return")

@@ -354,3 +354,56 @@ def test_grid_world_is_filmed_beside_its_source():
     np.testing.assert_allclose(_agent_centre(last[:, 320:]), goal)
     blue = lambda p: np.mean((p[..., 2].astype(int) - p[..., 0]) > 30)  # noqa: E731
     assert blue(last[30:-30, :320]) > 0.1 and blue(last[30:-30, 322:]) < 0.01
+
+
+def _rider_tilt(frame: np.ndarray) -> float:
+    """Degrees from vertical of the long axis of the bicycle rider's silhouette (its
+    reddish pixels), positive leaning to the image's right."""
+    rgb = frame.astype(int)
+    rows, cols = np.nonzero((rgb[..., 0] > 150) & (rgb[..., 0] - rgb[..., 2] > 60))
+    assert len(rows) > 100, "no rider in the frame"
+    _, vectors = np.linalg.eigh(np.cov(np.stack([cols - cols.mean(), rows - rows.mean()])))
+    axis = vectors[:, -1] if vectors[1, -1] < 0 else -vectors[:, -1]  # pointing up the image
+    return math.degrees(math.atan2(axis[0], -axis[1]))
+
+
+def _falling_bicycle():
+    """The bicycle from a 1.1 degree lean, no rider noise: with no steering torque it falls past
+    12 degrees in about 2 s, turning only a little."""
+    env = suite.load("bicycle", "balance", task_kwargs={"random": 0, "cg_noise": 0.0})
+
+    def start(physics, n):
+        states = np.zeros((n, 4))
+        states[:, 2] = 0.02  # roll, rad
+        return physics.qpos_qvel_from(states)
+
+    env.task.start_configurations = start
+    return env
+
+
+def test_each_domain_declares_the_camera_clips_use():
+    from tatl_mj.suite import bicycle, cartpole, mountain_car, pendulum
+
+    for module in (bicycle, cartpole, mountain_car, pendulum):
+        env = suite.load(module.__name__.rsplit(".", 1)[1], next(iter(module.TASKS)))
+        assert render.default_camera(env) == module.CAMERA
+        assert env.physics.model.name2id(module.CAMERA, "camera") >= 0
+    assert bicycle.CAMERA == "behind"
+    assert render.default_camera(gridworld.plain()) == render.DEFAULT_CAMERA  # draws itself; unused
+
+
+def test_default_camera_shows_the_bicycle_fall():
+    # Filmed side-on ("tracking") the roll is along the line of sight and the bicycle looks
+    # upright even in its terminal frame; the default camera (from behind) shows it lean.
+    from tatl_mj.suite import bicycle
+
+    tilts = {}
+    for camera in (None, "tracking"):
+        env = _falling_bicycle()
+        frames = render.render_episode(
+            env, lambda s: np.zeros((1, 1)), seconds=4, fps=2, width=160, height=120, camera=camera, on_end="stop"
+        )
+        assert abs(env.physics.state_vector()[2]) > bicycle.ROLL_LIMIT  # it fell: the clip ends on that frame
+        tilts[camera] = abs(_rider_tilt(frames[-1]) - _rider_tilt(frames[0]))
+    assert tilts[None] > 8.0, tilts  # about the 12 degree roll
+    assert tilts["tracking"] < 5.0, tilts  # what the old default showed

@@ -1,5 +1,7 @@
 """Known answers for the bases phi(s) of tatl_mj.transfer.features."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -71,6 +73,36 @@ def test_bad_bandwidth_and_nan_states_raise():
         LinearFeatures()(np.array([[np.nan, 0.0]]))
     with pytest.raises(ValueError, match="columns"):
         RBF(np.zeros((2, 2)), 1.0)(np.zeros((1, 3)))
+
+
+@pytest.mark.parametrize(
+    "sigma, message",
+    [
+        ([0.6, 0.0], r"RBF.sigma must be finite and > 0, got \[0.6 0. \]"),
+        (0.0, r"RBF.sigma must be finite and > 0"),
+        ([-0.5, 1.0], r"RBF.sigma must be finite and > 0"),
+        ([[1.0, 1.0], [0.0, 0.0]], r"RBF.sigma must be a finite invertible matrix"),
+        ([1.0, 2.0, 3.0], r"RBF.sigma must have shape \(2,\) or \(2, 2\), got \(3,\)"),
+    ],
+    ids=["zero-width", "zero-scalar", "negative", "zero-row", "wrong-size"],
+)
+def test_grid_with_a_centre_count_names_a_bad_bandwidth_without_dividing_by_zero(sigma, message):
+    # The centre count is split by the box's width in bandwidths; a zero bandwidth used to divide by
+    # zero there (a RuntimeWarning) before the basis refused it.
+    spec = {"kind": "rbf", "centers": 20, "low": [0.0, 0.0], "high": [1.0, 1.0], "sigma": sigma}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=message):
+            make_features(spec, 2)
+
+
+def test_grid_splits_the_count_by_widths_of_a_full_bandwidth_matrix():
+    # An invertible L with a zero diagonal entry: the widths are the rows' lengths (1 and 3 here),
+    # so the wider dimension relative to them, x, gets more centres; no division by zero.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rbf = RBF.grid([0.0, 0.0], [6.0, 6.0], 20, [[0.0, 1.0], [3.0, 0.0]], bias=False)
+    assert len(np.unique(rbf.centers[:, 0])) == 5 and len(np.unique(rbf.centers[:, 1])) == 4
 
 
 # --- Periodic (angle) coordinates -------------------------------------------------------
@@ -165,3 +197,18 @@ def test_make_features_accepts_periodic_and_names_bad_masks():
         make_features({**spec, "periodic": [1, 0]}, 2)
     with pytest.raises(ValueError, match="RBF.periodic"):
         RBF(np.zeros((2, 3)), 1.0, periodic=(True, False))
+
+
+def test_a_spec_with_a_zero_bandwidth_is_refused_without_a_warning():
+    # What tests/test_spec_fuzz.py ran into: the spec loader builds the basis to validate it.
+    import tomllib
+    from pathlib import Path
+
+    from tatl_mj.experiments import spec as spec_mod
+
+    table = tomllib.loads((Path(__file__).resolve().parents[1] / "tasks" / "ip_to_flipped_ip.toml").read_text())
+    table["source_learning"]["features"]["sigma"] = [0.6, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(spec_mod.SpecError, match=r"source_learning.features': RBF.sigma must be finite and > 0"):
+            spec_mod.parse_spec(table, "zero.toml")

@@ -3,7 +3,8 @@
 Everything is drawn from :func:`tatl_mj.experiments.summary.compare`, so the
 figure and the table show the same seeds and the same numbers:
 
-- Panel (a): average target return against target samples; a thin line per
+- Panel (a): target return (the undiscounted sum of an episode's rewards, the
+  mean over the evaluation episodes) against target samples; a thin line per
   seed and a thick median line per method; the random policy's return (a
   reference, dotted) and the threshold (dashed). Values far outside the bulk of
   the data are clipped to the axis and marked with triangles, so one diverged
@@ -44,6 +45,7 @@ LABELS = {"ta-tl": "TA-TL (paper, Alg. 1)", "uma-tl": "UMA-TL", "rl": "RL (no tr
 # none is close to the fixed ones or to the grey/black reference lines.
 PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173", "#e7ba52", "#008080")
 REFERENCE_METHOD = "ta-tl"  # the table's "vs" column divides by this method's median
+RETURN_LABEL = "return (undiscounted episode sum)"  # the y-axis of every return panel
 CLIP_SCALES = 6.0  # values beyond this many robust spreads from the bulk are clipped
 
 
@@ -346,8 +348,8 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     ax_curve.set_xticks(x_ticks, [compact(b) for b in x_ticks])
     ax_curve.minorticks_off()
     ax_curve.set_xlabel("target transitions counted (samples, Algorithm 2's rollouts, own data)")
-    ax_curve.set_ylabel("average return")
-    ax_curve.set_title("(a) average return", fontsize=10)
+    ax_curve.set_ylabel(RETURN_LABEL)
+    ax_curve.set_title("(a) return (mean over evaluation episodes)", fontsize=10)
     ax_curve.grid(alpha=0.25)
 
     # Panel (b): per-seed samples to threshold (or final returns without a threshold).
@@ -369,8 +371,8 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
         budget_ticks = spaced_ticks(budget_ticks, max(0.1, math.log10(never / smallest) / 12))
         ax_len.set_yticks(budget_ticks + [never], [compact(b) for b in budget_ticks] + ["never"])
         ax_len.minorticks_off()
-        ax_len.set_ylabel("target samples to threshold")
-        ax_len.set_title("(b) training length", fontsize=10)
+        ax_len.set_ylabel("target transitions to threshold")
+        ax_len.set_title("(b) target transitions to threshold", fontsize=10)
         ticks = [f"{_wrap(method_label(r.method))}\n{r.reached}/{len(r.seeds)} reached" for r in results]
         if len(results) > 5:  # slanted below: one line each
             ticks = [f"{method_label(r.method)} ({r.reached}/{len(r.seeds)})" for r in results]
@@ -390,7 +392,7 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
             ax_len.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
         ax_len.set_ylim(*final_limits)
         ax_len.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
-        ax_len.set_ylabel("final return")
+        ax_len.set_ylabel(f"final {RETURN_LABEL}")
         ax_len.set_title("(b) final return (no meaningful threshold)", fontsize=10)
         ticks = [_wrap(method_label(r.method)) if len(results) <= 5 else method_label(r.method) for r in results]
     # Up to five methods fit side by side (labels wrapped); more are slanted.

@@ -37,6 +37,10 @@ EXECUTORS = ("local", "ray")
 SOURCE_UNIT = "source"
 
 
+class MethodError(ValueError):
+    """A method asked for that a spec cannot run (raised before any work starts)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Unit:
     experiment: str
@@ -204,9 +208,10 @@ def _plan(
         names = list(spec.methods) if methods is None else list(methods)
         for name in names:
             if name not in custom and name not in registry.METHODS and name not in spec.methods:
-                raise ValueError(
-                    f"unknown method {name!r} for {spec.name}; valid methods: "
-                    f"{sorted(set(registry.METHODS) | set(spec.methods))}"
+                raise MethodError(
+                    f"unknown method {name!r} for {spec.name}; valid methods: {list(spec.methods)} "
+                    "(the methods its spec lists; other built-ins run with their default settings, "
+                    "plug-ins as module:Class)"
                 )
         units += [Unit(spec.name, seed, name) for seed in seeds for name in [SOURCE_UNIT, *names]]
     return units, custom

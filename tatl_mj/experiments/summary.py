@@ -226,7 +226,7 @@ def ablation_verdict(comparison: Comparison, method: str, ablation: str) -> str 
     """One plain sentence: does ``method`` beat its source-free ``ablation``?
 
     Seed by seed on the compared seeds, on final return (mean) and, where the
-    threshold is meaningful, on target samples to threshold (median; fewer is
+    threshold is meaningful, on target transitions to threshold (median; fewer is
     better): a side counts when the aggregate and more than half the seeds agree.
     It beats the ablation when one side is better and neither is worse.
     """
@@ -243,7 +243,7 @@ def ablation_verdict(comparison: Comparison, method: str, ablation: str) -> str 
         samp, fewer, more = _side(-sa, -sb, -mine.median_samples, -theirs.median_samples)
         sides.append(samp)
         parts.append(
-            f"median target samples to threshold {_samples_text(mine.median_samples)} vs "
+            f"median target transitions to threshold {_samples_text(mine.median_samples)} vs "
             f"{_samples_text(theirs.median_samples)} (fewer on {fewer}, more on {more} of {n} seeds)"
         )
     if max(sides) == 1 and min(sides) >= 0:

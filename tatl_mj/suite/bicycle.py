@@ -92,6 +92,9 @@ CG_ARM = 0.5  # m, half the distance between the two forces of the rider's coupl
 TORQUE_LIMIT = 2.0  # N m
 
 ACTIONS = np.array([[-TORQUE_LIMIT], [0.0], [TORQUE_LIMIT]])
+# The camera clips film from (tatl_mj.render): from behind, so the roll (what the task is
+# about) is across the line of sight; the side-on "tracking" camera looks along it.
+CAMERA = "behind"
 
 # Points of the front assembly in the rear frame's body coordinates (origin at the
 # rear wheel centre, axes of the upright bicycle): steer-axis point level with the

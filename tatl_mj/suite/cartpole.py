@@ -55,6 +55,9 @@ X_LIMIT = 2.4  # m
 START_HALF_WIDTH = 0.05  # every state entry starts uniform in +-0.05
 
 ACTIONS = np.array([[-20.0], [0.0], [20.0]])
+# The camera clips film from (tatl_mj.render): side-on, following the cart, so the pole
+# swings in the image plane and fills the frame ("fixed" shows the whole rail, small).
+CAMERA = "tracking"
 
 
 @dataclasses.dataclass(frozen=True)

@@ -84,6 +84,8 @@ VELOCITY_SCALE = CONTROL_TIMESTEP  # v (m per control step) = x_dot (m/s) * this
 DEFAULT_TIME_LIMIT = 400 * CONTROL_TIMESTEP  # s, 400 control steps
 GOAL_X = 0.5  # m
 X_MIN, X_MAX = -1.2, 0.6  # m, classic position range (the wall is at X_MIN)
+# The camera clips film from (tatl_mj.render): fixed, side-on, the whole hill in view.
+CAMERA = "tracking"
 V_MAX = 0.07  # classic velocity bound (m per control step), not enforced
 START_RANGE = (-0.6, -0.4)  # m
 # Positions a state may be set to: the classic range plus room for the wall's

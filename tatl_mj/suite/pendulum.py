@@ -54,6 +54,8 @@ CONTROL_TIMESTEP = 0.05  # s
 DEFAULT_TIME_LIMIT = 10.0  # s, 200 control steps
 TIP_RADIUS = 0.05  # m; fixed, so the tip inertia is 2/5 m r^2 for every mass
 START_HALF_WIDTH = 0.05  # rad and rad/s around hanging at rest
+# The camera clips film from (tatl_mj.render): fixed, side-on, the whole swing in view.
+CAMERA = "tracking"
 SCHEDULE_AMPLITUDE = 0.5  # m and kg
 SCHEDULE_PERIOD_STEPS = 100  # cos(pi i / 50) repeats every 100 control steps
 

@@ -165,9 +165,11 @@ class RBF:
                 f"(low={lo.tolist()}, high={hi.tolist()}); an angle's centres lie within one turn"
             )
         if isinstance(n_centers, (int, np.integer)):
-            sig = np.asarray(sigma, dtype=np.float64)
-            widths = np.diag(sig) if sig.ndim == 2 else np.broadcast_to(sig, (d,))
-            counts = _split_count(int(n_centers), (hi - lo) / np.abs(widths))
+            # The basis's width along each coordinate: |row j of L| (|sigma_j| for a diagonal L).
+            # L is validated first, as the basis below would (a ValueError naming sigma), so a
+            # width is never 0 and the spans never divide by zero.
+            widths = np.linalg.norm(RBF(np.zeros((1, d)), sigma).sigma, axis=1)
+            counts = _split_count(int(n_centers), (hi - lo) / widths)
         else:
             counts = [int(c) for c in n_centers]
             if len(counts) != d or min(counts) < 1:
