@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from tatl_mj.experiments import summary
@@ -115,3 +116,51 @@ def test_ablation_pairs_follow_built_ins_and_variants():
         ("ta-tl-h-no-cart", "apprentice-upright"),
     ]
     assert summary.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
+
+
+def _with_counts(exp: dict) -> dict:
+    for data in exp["methods"].values():
+        data["curve"]["target_transitions"] = [list(data["curve"]["samples"]) for _ in data["seeds"]]
+    return exp
+
+
+def test_a_fixed_reference_threshold_does_not_move_when_a_method_is_added():
+    runs = {"ta-tl": {s: [5.0, 8.0] for s in range(4)}, "rl": {s: [1.0, 2.0] for s in range(4)}}
+    random = {s: 0.0 for s in range(4)}
+    alone = {**experiment(runs, random), "reference_return": 10.0}
+    stronger = {**experiment({**runs, "oracle": {s: [50.0, 60.0] for s in range(4)}}, random), "reference_return": 10.0}
+    assert summary.compare(alone).threshold == summary.compare(stronger).threshold == pytest.approx(9.0)
+    # Without a reference the old relative rule moves with the best method listed.
+    del alone["reference_return"], stronger["reference_return"]
+    assert summary.compare(alone).threshold != summary.compare(stronger).threshold
+
+
+def test_statistics_give_normalised_iqm_areas_and_interval_verdicts():
+    rng = np.random.default_rng(0)
+    seeds = range(8)
+    good = {s: [6.0 + rng.normal(), 9.0 + rng.normal()] for s in seeds}
+    twin = {s: list(v) for s, v in good.items()}
+    poor = {s: [1.0 + rng.normal(), 2.0 + rng.normal()] for s in seeds}
+    exp = _with_counts(
+        {
+            **experiment(
+                {"ta-tl-h": good, "apprentice-upright": twin, "ta-tl": poor, "apprentice-fqi": good},
+                {s: 0.0 for s in seeds},
+            ),
+            "reference_return": 10.0,
+        }
+    )
+    spec = {"methods": {"ta-tl-h": {}, "apprentice-upright": {}, "ta-tl": {}, "apprentice-fqi": {}}}
+    summary._statistics(exp, spec)
+    data = exp["methods"]["ta-tl-h"]
+    np.testing.assert_allclose(data["normalised"], np.array([good[s] for s in seeds]) / 10.0)
+    assert data["iqm"][1]["low"] < data["iqm"][1]["value"] < data["iqm"][1]["high"]
+    verdicts = {(p["method"], p["ablation"]): p["verdict"] for p in exp["ablations"]}
+    assert verdicts == {("ta-tl-h", "apprentice-upright"): "not credited", ("ta-tl", "apprentice-fqi"): "worse"}
+
+
+def test_counted_area_is_a_step_function_of_counted_transitions():
+    # Counted 1000 at the first budget (rollouts): score 0 until then, then 1.
+    area = summary.counted_area(np.array([[1000, 1000]]), np.array([[1.0, 1.0]]), 100, 10000)
+    assert area[0] == pytest.approx(0.5, abs=0.01)
+    assert summary.counted_area(np.array([[100, 10000]]), np.array([[1.0, 1.0]]), 100, 10000)[0] == 1.0

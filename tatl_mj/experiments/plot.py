@@ -174,37 +174,99 @@ def table(summary: dict) -> str:
             continue
         if not comparison.meaningful:
             lines += [_no_threshold_sentence(comparison), ""]
-        lines += [
-            f"| method | data | final return: mean ± sd (median) | target transitions to threshold: median "
-            f"(per seed) | vs {method_label(REFERENCE_METHOD)} |",
-            "|---|---|---|---|---|",
-        ]
+        stats_on = any("auc" in exp["methods"][r.method] for r in comparison.methods)
+        header = (
+            "| method | data | final return: mean ± sd (median) | target transitions to threshold: median (per seed) "
+        )
+        header += f"| vs {method_label(REFERENCE_METHOD)} "
+        if stats_on:
+            header += "| normalised final score: IQM [95% CI] | area under the curve: IQM [95% CI] "
+        lines += [header + "|", "|---" * header.count("|") + "|"]
         reference = comparison.result(REFERENCE_METHOD)
         for r in comparison.methods:
+            data = exp["methods"][r.method]
             finals = np.asarray(r.final_returns)
             final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
             if comparison.meaningful:
                 per_seed = ", ".join(_fmt_samples(v) for v in r.samples_to_threshold)
-                samples = f"{_fmt_samples(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached)"
+                first = min(data["curve"]["samples"])
+                left = sum(1 for v in r.samples_to_threshold if math.isfinite(v) and v <= first)
+                censored = f"; {left} at the smallest budget (left-censored)" if left else ""
+                samples = f"{_fmt_samples(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached{censored})"
                 ratio = _ratio(r, reference)
             else:
                 samples, ratio = "no meaningful threshold", "n/a"
-            data = exp["methods"][r.method].get("data", "shared")
-            lines.append(f"| {method_label(r.method)} | {data} | {final} | {samples} | {ratio} |")
-        verdicts = [ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})]
+            row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {samples} | {ratio} "
+            if stats_on:
+                row += f"| {_interval(data.get('final_iqm'))} | {_interval(data.get('auc'))} "
+            lines.append(row + "|")
+        verdicts = [_pair_sentence(p) for p in exp.get("ablations", [])]
+        if not stats_on:
+            verdicts = [
+                ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})
+            ]
         if any(verdicts):
             lines += ["", "Transfer against its ablation without the source:", ""]
             lines += [f"- {v}" for v in verdicts if v]
+        best = exp.get("best_baseline")
+        if exp.get("vs_best_baseline"):
+            lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
+            lines += [f"- {_pair_sentence(p, against='the best baseline')}" for p in exp["vs_best_baseline"]]
         threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
         mapping = sorted(set(exp.get("mapping_target_samples", [])))
+        reference_return = exp.get("reference_return")
+        rule = (
+            f"reference return {reference_return:.4g} (fixed; threshold at a normalised score of "
+            f"{summary.get('reference_threshold', 0.9)})"
+            if reference_return is not None
+            else "no reference return declared: the threshold is relative to the best method listed"
+        )
         lines += [
             "",
-            f"Random policy: {comparison.random_return:.4g}; threshold: {threshold}; target "
+            f"Random policy: {comparison.random_return:.4g}; {rule}; threshold: {threshold}; target "
             f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
             f"{mapping}.",
             "",
         ]
     return "\n".join(lines)
+
+
+def _interval(estimate: dict | None) -> str:
+    if not estimate or estimate.get("value") is None:
+        return "n/a"
+    if estimate.get("low") is None:
+        return f"{estimate['value']:.2f} (no interval)"
+    return f"{estimate['value']:.2f} [{estimate['low']:.2f}, {estimate['high']:.2f}]"
+
+
+VERDICT_WORDS = {
+    "credited": "**credited**",
+    "worse": "**worse**",
+    "not credited": "**not credited**",
+}
+
+
+def _pair_sentence(pair: dict, against: str = "its source-free ablation") -> str:
+    """One line: P(method > other) on the area under the curve and at the largest budget, and the verdict."""
+    a, b = pair["method"], pair["ablation"]
+    meaning = {
+        "credited": "the interval lies above 0.5",
+        "worse": "the interval lies below 0.5",
+        "not credited": "the interval holds 0.5",
+    }[pair["verdict"]]
+    if pair["probability_of_improvement"].get("low") is None:
+        meaning = "too few seeds for an interval"
+    if against == "its source-free ablation":
+        outcome = f"{VERDICT_WORDS[pair['verdict']]} to transfer"
+    else:
+        outcome = {"credited": "**better**", "worse": "**worse**", "not credited": "**no clear difference**"}[
+            pair["verdict"]
+        ]
+    return (
+        f"`{a}` vs `{b}`: P(`{a}` > `{b}`) on the area under the curve "
+        f"{_interval(pair['probability_of_improvement'])}, at the largest budget "
+        f"{_interval(pair['probability_of_improvement_final'])}: {outcome} ({meaning})."
+    )
 
 
 def _no_threshold_sentence(comparison: Comparison) -> str:

@@ -113,6 +113,10 @@ class Preset:
     target_budgets: tuple[int, ...]
     evaluation_episodes: int
     evaluation_steps: int
+    # The target task's fixed reference return under this evaluation protocol (a
+    # controller or long-budget learner on the true system, never one of the
+    # methods compared): normalised scores and the threshold are measured against it.
+    reference_return: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)

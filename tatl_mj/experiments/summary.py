@@ -5,10 +5,19 @@ Definitions (one place; the table, the figures and summary.json all use them):
 - Seeds compared: only the seeds every method with any finished record shares
   (and whose source unit finished). A method that finished extra seeds has them
   listed, not averaged in; when the seed sets differ the table says so.
-- Threshold: ``R_random + 0.95 (R_best - R_random)`` over the compared seeds,
-  where ``R_best`` is the best method's final return (mean over seeds, at the
-  largest budget) and ``R_random`` the uniformly random policy's return under the
-  same evaluation protocol.
+- Threshold: ``R_random + 0.9 (R_reference - R_random)``, a normalised score of
+  0.9, where ``R_reference`` is the experiment's fixed reference return (its
+  preset's ``reference_return``) and ``R_random`` the uniformly random policy's
+  return under the same evaluation protocol (mean over the compared seeds). A
+  spec that declares no reference falls back to ``R_random + 0.95 (R_best -
+  R_random)``, ``R_best`` the best method's mean final return (relative to the
+  methods listed, so the table says so).
+- Interval estimates (``tatl_mj.experiments.statistics``), with a reference:
+  per method and budget the IQM of the normalised score with its 95%
+  stratified-bootstrap interval; the area under the normalised learning curve
+  over log counted target transitions (``auc``); and the probability of
+  improvement over the method's source-free ablation and over the best baseline,
+  on that area, with the verdict its interval gives.
 - No meaningful threshold: a threshold at or below ``R_random`` (no method beat
   the random policy on average) says nothing about learning speed; samples to
   threshold are then not reported and the experiment is judged on final returns.
@@ -32,9 +41,11 @@ from typing import Any
 
 import numpy as np
 
+from tatl_mj.experiments import statistics as stats
 from tatl_mj.experiments.records import RunDirectory, read_json
 
-THRESHOLD_FRACTION = 0.95
+THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
+REFERENCE_THRESHOLD = 0.9  # normalised score: the threshold with a declared reference return
 
 
 def samples_to_threshold(
@@ -150,9 +161,13 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
         # Without shared seeds there is no threshold; the value is still worth showing.
         random_return = float(np.mean([random_by_seed[s] for s in (shared or random_by_seed)]))
     threshold, best, meaningful = None, None, False
+    reference = experiment.get("reference_return")
     if shared and random_return is not None:
         finals = {m: float(np.mean([data[m]["final_return"][i] for i in rows])) for m, rows, _ in results}
         threshold, best, meaningful = threshold_for(finals, random_return, fraction)
+        if reference is not None:  # fixed: no method added or removed can move it
+            threshold = random_return + REFERENCE_THRESHOLD * (reference - random_return)
+            meaningful = bool(reference > random_return)
 
     out = []
     for m, rows, _ in results:
@@ -271,7 +286,9 @@ def _random_by_seed(experiment: dict) -> dict[int, float] | None:
     return {s: float(experiment["random_return"]) for s in seeds}
 
 
-def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: list[str]) -> dict:
+def _experiment(
+    run_dir: RunDirectory, name: str, seeds: list[int], methods: list[str], reference: float | None = None
+) -> dict:
     sources = {}
     for seed in seeds:
         path = run_dir.record_path(name, seed, "source")
@@ -309,6 +326,7 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
         }
     source_seeds = sorted(sources)
     experiment: dict[str, Any] = {
+        "reference_return": reference,
         "methods": out_methods,
         "source_seeds": source_seeds,
         "random_returns": [sources[s]["random_return"] for s in source_seeds],
@@ -340,6 +358,106 @@ def _experiment(run_dir: RunDirectory, name: str, seeds: list[int], methods: lis
     return experiment
 
 
+AUC_POINTS = 256
+
+
+def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float) -> np.ndarray:
+    """Per seed, the mean normalised score over log counted target transitions in [low, high].
+
+    A seed's curve is a step function of the transitions it counted: at x, the score
+    of its last budget whose count is <= x, and 0 (the random policy's) before its
+    first. So a method that counts more transitions for the same budget (Algorithm
+    2's rollouts) is credited later, as the learning curve on counted transitions shows.
+    """
+    grid = np.logspace(np.log10(low), np.log10(high), AUC_POINTS)
+    counts, scores = np.atleast_2d(counts).astype(np.float64), np.atleast_2d(scores).astype(np.float64)
+    out = np.zeros(len(scores))
+    for i, (c, y) in enumerate(zip(counts, scores)):
+        order = np.argsort(c, kind="stable")
+        c, y = c[order], y[order]
+        last = np.searchsorted(c, grid, side="right") - 1
+        out[i] = np.mean(np.where(last >= 0, y[np.maximum(last, 0)], 0.0))
+    return out
+
+
+def _statistics(experiment: dict, spec: dict) -> None:
+    """Normalised scores, IQM intervals, areas and probabilities of improvement, in place."""
+    reference = experiment.get("reference_return")
+    methods = experiment["methods"]
+    comparison = compare(experiment)
+    seeds = list(comparison.seeds)
+    if reference is None or not seeds:
+        return
+    random_by_seed = _random_by_seed(experiment) or {}
+    if any(reference <= random_by_seed[s] for s in seeds):
+        experiment["statistics_note"] = "the reference return is not above the random policy's: no normalised scores"
+        return
+    randoms = np.array([random_by_seed[s] for s in seeds])
+    budgets = [float(b) for b in next(iter(methods.values()))["curve"]["samples"]]
+    areas: dict[str, np.ndarray] = {}
+    finals: dict[str, np.ndarray] = {}
+    for name, data in methods.items():
+        if name not in {r.method for r in comparison.methods}:
+            continue
+        rows = [data["seeds"].index(s) for s in seeds]
+        scores = stats.normalised(np.asarray(data["curve"]["mean_return"])[rows], randoms[:, None], reference)
+        counts = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)[rows]
+        counts = np.where(counts > 0, counts, budgets[0])  # a reference learns nothing: it counts from the start
+        data["normalised"] = scores.tolist()
+        data["iqm"] = [stats.iqm_interval([scores[:, j]]).as_dict() for j in range(scores.shape[1])]
+        areas[name], finals[name] = counted_area(counts, scores, budgets[0], budgets[-1]), scores[:, -1]
+        data["auc"] = {**stats.iqm_interval([areas[name]]).as_dict(), "per_seed": areas[name].tolist()}
+        data["final_iqm"] = stats.iqm_interval([finals[name]]).as_dict()
+    baselines = [m for m in _baselines() if m in areas]
+    best = max(baselines, key=lambda m: float(stats.iqm(areas[m])), default=None)
+    experiment["best_baseline"] = best
+    experiment["ablations"] = [
+        _pair(method, ablation, areas, finals)
+        for method, ablation in ablation_pairs(spec.get("methods") or {})
+        if method in areas and ablation in areas
+    ]
+    experiment["vs_best_baseline"] = [
+        _pair(m, best, areas, finals) for m in areas if best is not None and m != best and m not in baselines
+    ]
+
+
+def _pair(method: str, other: str, areas: dict, finals: dict) -> dict:
+    on_area = stats.improvement_interval([(areas[method], areas[other])])
+    at_final = stats.improvement_interval([(finals[method], finals[other])])
+    return {
+        "method": method,
+        "ablation": other,
+        "probability_of_improvement": on_area.as_dict(),
+        "probability_of_improvement_final": at_final.as_dict(),
+        "verdict": stats.verdict(on_area),
+    }
+
+
+def _baselines() -> tuple[str, ...]:
+    from tatl_mj.transfer import registry
+
+    return registry.BASELINES
+
+
+def aggregate(experiments: dict) -> dict:
+    """Across experiments: each method's IQM of normalised final scores over every experiment
+    and seed it ran (stratified by experiment), with its interval, and its per-run scores."""
+    strata: dict[str, list[np.ndarray]] = {}
+    for exp in experiments.values():
+        for name, data in exp["methods"].items():
+            if "normalised" in data:
+                strata.setdefault(name, []).append(np.asarray(data["normalised"])[:, -1])
+    return {
+        name: {
+            **stats.iqm_interval(parts).as_dict(),
+            "experiments": len(parts),
+            "runs": int(sum(len(p) for p in parts)),
+            "scores": np.concatenate(parts).tolist(),
+        }
+        for name, parts in strata.items()
+    }
+
+
 def _json_samples(value: float) -> int | None:
     return None if math.isinf(value) else int(value)
 
@@ -357,12 +475,17 @@ def build(
         # Each experiment compares the methods its spec lists (and any the run added to all).
         listed = list(spec.get("methods") or {})
         own = [m for m in methods if m in listed or not _listed_anywhere(m, specs)]
-        experiments[spec["name"]] = {**_experiment(run_dir, spec["name"], seeds, own), "spec": spec}
+        reference = ((spec.get("presets") or {}).get(preset) or {}).get("reference_return")
+        experiment = _experiment(run_dir, spec["name"], seeds, own, reference)
+        _statistics(experiment, spec)
+        experiments[spec["name"]] = {**experiment, "spec": spec}
     return {
         "experiments": experiments,
+        "aggregate": aggregate(experiments),
         "preset": preset,
         "seeds": seeds,
         "methods": methods,
         "threshold_fraction": THRESHOLD_FRACTION,
+        "reference_threshold": REFERENCE_THRESHOLD,
         **extra,
     }

@@ -1,0 +1,85 @@
+"""Interval estimates (tatl_mj.experiments.statistics) against independent computations."""
+
+import numpy as np
+import pytest
+
+from tatl_mj.experiments import statistics as st
+
+
+def test_iqm_is_the_mean_of_the_middle_half():
+    x = np.array([9.0, -3.0, 1.0, 4.0, 100.0, 2.0, 7.0, 0.0])  # sorted: -3 0 1 2 4 7 9 100
+    assert st.iqm(x) == pytest.approx((1 + 2 + 4 + 7) / 4)
+    assert st.iqm(np.arange(4.0)) == pytest.approx(1.5)
+
+
+def test_normalised_scores_put_random_at_0_and_the_reference_at_1():
+    np.testing.assert_allclose(st.normalised([-10.0, 0.0, 5.0], -10.0, 0.0), [0.0, 1.0, 1.5])
+    np.testing.assert_allclose(st.normalised([1.0, 1.0], np.array([0.0, 0.5]), 2.0), [0.5, 1 / 3])
+    with pytest.raises(ValueError, match="must lie above the random"):
+        st.normalised([1.0], 3.0, 2.0)
+
+
+def _manual_iqm_interval(strata, reps, rng):
+    stats = []
+    for _ in range(reps):
+        stats.append(st.iqm(np.concatenate([rng.choice(s, size=len(s), replace=True) for s in strata])))
+    return np.percentile(stats, [2.5, 97.5])
+
+
+def test_iqm_interval_matches_an_independent_stratified_bootstrap():
+    rng = np.random.default_rng(5)
+    strata = [rng.normal(0.0, 1.0, 10), rng.normal(2.0, 0.5, 7)]
+    estimate = st.iqm_interval(strata)
+    assert estimate.value == pytest.approx(st.iqm(np.concatenate(strata)))
+    low, high = _manual_iqm_interval(strata, 20000, np.random.default_rng(1))
+    assert estimate.low == pytest.approx(low, abs=0.05) and estimate.high == pytest.approx(high, abs=0.05)
+    assert estimate.low < estimate.value < estimate.high
+
+
+def test_probability_of_improvement_is_the_mann_whitney_statistic():
+    x, y = np.array([1.0, 2.0, 3.0]), np.array([2.0, 0.0])
+    # Pairs: (1>2 no, 1>0 yes), (2=2 half, 2>0 yes), (3>2 yes, 3>0 yes): 4.5 of 6.
+    assert st.improvement_interval([(x, y)]).value == pytest.approx(4.5 / 6)
+    u = __import__("scipy.stats").stats.mannwhitneyu(x, y).statistic
+    assert st.improvement_interval([(x, y)]).value == pytest.approx(u / 6)
+
+
+def test_a_method_identical_to_its_ablation_is_not_credited():
+    scores = np.random.default_rng(0).normal(size=10)
+    estimate = st.improvement_interval([(scores, scores.copy())])
+    assert estimate.value == pytest.approx(0.5) and estimate.low < 0.5 < estimate.high
+    assert st.verdict(estimate) == st.NOT_CREDITED
+    same = st.improvement_interval([(np.ones(5), np.ones(5))])  # all tied: the interval is the point
+    assert (same.value, same.low, same.high) == (0.5, 0.5, 0.5) and st.verdict(same) == st.NOT_CREDITED
+
+
+def test_a_clearly_better_method_is_credited_and_a_clearly_worse_one_is_worse():
+    rng = np.random.default_rng(1)
+    good, bad = rng.normal(5.0, 1.0, 10), rng.normal(0.0, 1.0, 10)
+    assert st.verdict(st.improvement_interval([(good, bad)])) == st.CREDITED
+    assert st.verdict(st.improvement_interval([(bad, good)])) == st.WORSE
+    # One seed each: no interval, so no credit either way.
+    one = st.improvement_interval([(good[:1], bad[:1])])
+    assert one.value == 1.0 and np.isnan(one.low) and st.verdict(one) == st.NOT_CREDITED
+
+
+def test_area_under_the_curve_over_log_budget():
+    budgets = [10, 100, 1000]
+    assert st.area_under_curve(budgets, np.ones(3)) == pytest.approx(1.0)
+    # 0 then 1 then 1 over equal log steps: (0.5 + 1) / 2.
+    np.testing.assert_allclose(st.area_under_curve(budgets, np.array([[0.0, 1.0, 1.0]])), [0.75])
+
+
+def test_performance_profile_counts_runs_above_each_tau():
+    np.testing.assert_allclose(st.performance_profile([0.1, 0.5, 0.9, 1.2], [0.0, 0.5, 1.0]), [1.0, 0.5, 0.25])
+
+
+def test_rliable_agrees_where_it_installs():
+    """An optional cross-check: rliable's IQM and probability of improvement on the same arrays."""
+    rly = pytest.importorskip("rliable.metrics", reason="rliable is an optional cross-check")
+    rng = np.random.default_rng(3)
+    x, y = rng.normal(1.0, 1.0, (12, 1)), rng.normal(0.0, 1.0, (12, 1))
+    assert float(rly.aggregate_iqm(x)) == pytest.approx(st.iqm(x.ravel()))
+    assert float(rly.probability_of_improvement(x, y)) == pytest.approx(
+        st.improvement_interval([(x[:, 0], y[:, 0])]).value
+    )
