@@ -140,9 +140,15 @@ def table(summary: dict) -> str:
     """Markdown: per experiment and method, final return, samples to threshold, ratio to TA-TL."""
     lines = [
         f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Methods are compared only over the "
-        "seeds they all finished. Threshold = random return + "
-        f"{summary.get('threshold_fraction', THRESHOLD_FRACTION):.0%} of (best method's mean final return "
-        "- random return). Samples to threshold: the real-target transitions a seed counted (its samples, "
+        "seeds they all finished. Normalised score: (return - random return) / (reference return - random "
+        "return), the reference fixed per experiment (under each table). IQM: the mean of the middle half of "
+        "the seeds; [95% CI]: stratified percentile bootstrap. Area under the curve: the mean normalised "
+        "score over log counted target transitions, from the smallest budget to the largest. Verdicts: "
+        "P(method > its source-free ablation) on that area; credited to transfer when its interval lies "
+        "above 0.5, worse below, not credited otherwise. Threshold = random return + "
+        f"{summary.get('reference_threshold', 0.9):.0%} of (reference return - random return) (without a "
+        f"reference: {summary.get('threshold_fraction', THRESHOLD_FRACTION):.0%} of the best method's gap). "
+        "Samples to threshold: the real-target transitions a seed counted (its samples, "
         "Algorithm 2's rollouts of the projected source policy, data it drew itself) at the smallest budget "
         "from which its return stays at or above the threshold for every larger budget ('never' if none); "
         f"the median counts 'never' as infinite. vs {method_label(REFERENCE_METHOD)}: that median over "
@@ -229,6 +235,56 @@ def table(summary: dict) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def aggregate_table(summary: dict) -> str:
+    """Markdown: each method's IQM of normalised final scores over every experiment and seed it ran."""
+    rows = summary.get("aggregate") or {}
+    if not rows:
+        return ""
+    lines = [
+        "### Across experiments",
+        "",
+        "Each method's normalised final score (at the largest budget) over every experiment with a "
+        "reference return and every seed it ran there: IQM [95% CI] (stratified by experiment). "
+        "Methods run on different sets of experiments are not strictly comparable; the count says which.",
+        "",
+        "| method | experiments | runs | normalised final score: IQM [95% CI] |",
+        "|---|---|---|---|",
+    ]
+    for name in sorted(rows, key=lambda m: -(rows[m]["value"] or -math.inf)):
+        r = rows[name]
+        lines.append(f"| {method_label(name)} | {r['experiments']} | {r['runs']} | {_interval(r)} |")
+    return "\n".join(lines) + "\n"
+
+
+def profile(summary: dict, path: str | Path) -> Path:
+    """Performance profiles: the fraction of runs above each normalised score, per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tatl_mj.experiments.statistics import performance_profile
+
+    rows = summary["aggregate"]
+    taus = np.linspace(-0.5, 1.5, 201)
+    colors = method_colors(sorted(rows))
+    fig, ax = plt.subplots(figsize=(10.5, 4.8))
+    for i, name in enumerate(sorted(rows, key=lambda m: -(rows[m]["value"] or -math.inf))):
+        style = ("-", "--", ":", "-.")[i % 4]  # identical curves stay visible
+        ax.plot(taus, performance_profile(rows[name]["scores"], taus), style, color=colors[name], lw=1.6,
+                label=f"{method_label(name)} ({rows[name]['experiments']} exp.)")  # fmt: skip
+    ax.set_xlabel("normalised final score tau ((R - R_random) / (R_reference - R_random))")
+    ax.set_ylabel("fraction of runs with score > tau")
+    ax.set_title("Performance profiles over every experiment and seed", fontsize=10)
+    ax.grid(alpha=0.25)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
 
 
 def _interval(estimate: dict | None) -> str:
@@ -534,7 +590,9 @@ def plot(run_dir: str | Path) -> list[Path]:
         if not compare(experiment).seeds:
             continue
         written.append(figure(name, experiment, figures / f"{name}.png"))
+    if summary.get("aggregate"):
+        written.append(profile(summary, figures / "performance_profile.png"))
     results = run_dir / "results.md"
-    results.write_text(table(summary) + "\n")
+    results.write_text(table(summary) + "\n" + aggregate_table(summary) + "\n")
     written.append(results)
     return written
