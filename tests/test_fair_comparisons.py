@@ -8,6 +8,7 @@ import types
 import numpy as np
 import pytest
 from conftest import ROOT, TINY
+from test_transfer_method import SourceQ  # Q_S(x, a) = a x_0 over actions -1, 0, 1
 
 from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
@@ -97,15 +98,6 @@ def test_uma_tl_prior_keeps_the_source_in_every_fit():
     """Bias-only features: RL and UMA-TL can only learn one value per action, whatever the
     state; with the prior kept, Q(s, a) = Q_S(s, a) + c_a, where one iteration's c_a is the
     mean over action a's samples of r + gamma max_b Q_S(s', b) - Q_S(s, a)."""
-
-    class SourceQ:
-        n_actions = 3
-
-        def values(self, x):
-            return np.asarray(x)[:, :1] * ACTIONS[:, 0][None, :]
-
-        def greedy(self, x):
-            return np.argmax(self.values(x), axis=1)
 
     data = _true_samples(300, 2)
     problem = _toy(source_q=SourceQ())

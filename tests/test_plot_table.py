@@ -55,8 +55,14 @@ def row(table: str, label: str) -> list[str]:
 
 def test_ratio_is_the_median_over_ta_tl_median():
     table = plot.table(summary({"ta-tl": [100, 100, None], "uma-tl": [1000, 1000, 100], "rl": [None, None, 1000]}))
-    assert row(table, "TA-TL (paper, Alg. 1)")[3:] == ["100 (100, 100, never; 2/3 reached; 2 at the smallest budget (left-censored))", "-"]
-    assert row(table, "UMA-TL")[3:] == ["1,000 (1,000, 1,000, 100; 3/3 reached; 1 at the smallest budget (left-censored))", "10.0x"]
+    assert row(table, "TA-TL (paper, Alg. 1)")[3:] == [
+        "100 (100, 100, never; 2/3 reached; 2 at the smallest budget (left-censored))",
+        "-",
+    ]
+    assert row(table, "UMA-TL")[3:] == [
+        "1,000 (1,000, 1,000, 100; 3/3 reached; 1 at the smallest budget (left-censored))",
+        "10.0x",
+    ]
     # RL's median seed never reached it: the ratio is at least the largest budget over TA-TL's.
     assert row(table, "RL (no transfer)")[3:] == [
         "never (never, never, 1,000; 1/3 reached)",
