@@ -6,7 +6,9 @@ reused by every method). Phase two, per (experiment, seed, method): one
 method's learning curve. Workers return their results; only this process
 writes, each record atomically, so a crash or a kill loses no finished unit
 and a rerun of the same command resumes where it stopped. A failing unit is
-reported (traceback in DIR/failures/) and does not take the others down.
+reported (traceback in DIR/failures/) and does not take the others down; once
+every other unit has finished and the summary is written, :func:`run` raises
+:class:`RunFailed`, so a run with a failed unit never looks like a success.
 """
 
 from __future__ import annotations
@@ -39,6 +41,27 @@ SOURCE_UNIT = "source"
 
 class MethodError(ValueError):
     """A method asked for that a spec cannot run (raised before any work starts)."""
+
+
+class RunFailed(RuntimeError):
+    """Units failed (or were skipped because their source unit failed).
+
+    Raised by :func:`run` only after every other unit finished, its record
+    written, and the summary written; ``summary`` is what :func:`run` would have
+    returned (its ``failures`` lists each unit), ``failed`` and ``skipped`` count
+    them, ``failures_dir`` holds the tracebacks. A rerun of the same command
+    retries exactly these units.
+    """
+
+    def __init__(self, summary: dict, failed: int, skipped: int, total: int, failures_dir: Path) -> None:
+        self.summary, self.failed, self.skipped, self.total = summary, failed, skipped, total
+        self.failures_dir = failures_dir
+        units = failed + skipped
+        parts = [f"{failed} failed"] + ([f"{skipped} skipped as their source unit failed"] if skipped else [])
+        super().__init__(
+            f"{units} of {total} work unit{'s' if total != 1 else ''} did not finish ({', '.join(parts)}); "
+            f"tracebacks in {failures_dir}/; rerun the same command to retry them"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,22 +252,26 @@ class _Recorder:
     def __init__(self, run_dir: RunDirectory, done: set[Unit], bar: Any) -> None:
         self.run_dir, self.done, self.bar = run_dir, done, bar
         self.failures: list[str] = []
+        self.failed = self.skipped = 0
 
     def __call__(self, unit: Unit, result: dict) -> None:
         run_dir = self.run_dir
+        path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
         if "error" in result:
-            path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
             write_atomic(path, result["error"].encode())
             last = result["error"].strip().splitlines()[-1]
             self.failures.append(f"{unit}: {last} (see {path})")
+            self.failed += 1
             self.bar.write(f"FAILED {unit}: {last}")
         else:
             run_dir.write_unit(unit.experiment, unit.seed, unit.name, result["record"], result.get("blob"))
             self.done.add(unit)
+            path.unlink(missing_ok=True)  # an earlier run's traceback of this unit no longer applies
         self.bar.update(1)
 
     def skip(self, unit: Unit, why: str) -> None:
         self.failures.append(f"{unit}: skipped, {why}")
+        self.skipped += 1
         self.bar.update(1)
 
 
@@ -260,6 +287,9 @@ def run(
     progress: bool = True,
 ) -> dict:
     """Runs (or resumes) every unit; writes and returns the summary.
+
+    Raises :class:`RunFailed` (after every other unit finished and the summary was
+    written) if any unit failed or was skipped; nothing finished is lost.
 
     ``methods``: None runs each spec's own ``[methods]``; a list of names runs
     those built-ins; a dict maps names to method objects implementing
@@ -330,6 +360,8 @@ def _run_locked(
         failures=record.failures,
     )
     write_json(run_dir.summary, summary)
+    if record.failed or record.skipped:
+        raise RunFailed(summary, record.failed, record.skipped, len(all_units), run_dir.root / "failures")
     return summary
 
 
