@@ -127,6 +127,9 @@ def _run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 128 + stop.signum
+    except runner.ExecutorError as error:  # raised before any work starts
+        print(f"tatl run: {error}", file=sys.stderr)
+        return 2
     except runner.MethodError as error:  # raised before any work starts
         print(f"tatl run: --methods: {error}", file=sys.stderr)
         return 2

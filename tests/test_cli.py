@@ -255,3 +255,35 @@ def test_run_with_a_bad_user_domain_is_one_line(tmp_path, capsys):
         f"tatl run: {spec}: key 'source.domain': domain 'plugin_domain:pointmass': module 'plugin_domain' "
         "has no attribute 'pointmass'\n"
     )
+
+
+def test_run_with_a_wrong_ray_address_is_one_line_and_touches_nothing(tmp_path, capsys):
+    # Nothing listens at the address (a port just freed, on loopback): one line at once, not
+    # Ray's minutes of retries, and the output folder is never made.
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    out = tmp_path / "out"
+    base = [
+        "run",
+        str(write_tiny(tmp_path)),
+        "--preset",
+        "tiny",
+        "--seeds",
+        "1",
+        "--out",
+        str(out),
+        "--executor",
+        "ray",
+    ]
+    code = cli.main([*base, "--address", f"127.0.0.1:{port}"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err and not out.exists(), err
+    assert err.startswith(f"tatl run: no Ray cluster answers at --address 127.0.0.1:{port} (Connection refused); ")
+    code = cli.main([*base, "--address", "127.0.0.1"])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (
+        "tatl run: --address '127.0.0.1': expected host:port (e.g. 127.0.0.1:6379), 'auto' or ray://host:port\n"
+    )
