@@ -105,6 +105,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"tatl run: --methods: {error}", file=sys.stderr)
         return 2
     previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    failed: runner.RunFailed | None = None
     try:
         summary = runner.run(
             specs,
@@ -116,6 +117,8 @@ def _run(args: argparse.Namespace) -> int:
             address=args.address,
             methods=methods,
         )
+    except runner.RunFailed as error:  # every other unit finished and the summary was written
+        failed, summary = error, error.summary
     except Interrupted as stop:
         name = signal.Signals(stop.signum).name
         # Leading newline: the progress bar's line is left unfinished.
@@ -124,6 +127,9 @@ def _run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 128 + stop.signum
+    except runner.ExecutorError as error:  # raised before any work starts
+        print(f"tatl run: {error}", file=sys.stderr)
+        return 2
     except runner.MethodError as error:  # raised before any work starts
         print(f"tatl run: --methods: {error}", file=sys.stderr)
         return 2
@@ -140,13 +146,13 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    failures = summary.get("failures", [])
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
-    for line in failures:
-        print(f"FAILED {line}", file=sys.stderr)
-    return 1 if failures else 0
+    if failed is not None:  # one line; each unit's is in summary.json's "failures" and its traceback file
+        print(f"tatl run: {failed}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _methods(text: str | None) -> dict | None:

@@ -177,7 +177,7 @@ class _Simulator:
             return float(max_episode_steps)
         time_limit = self.kwargs.get("time_limit")
         if time_limit is None:
-            factory = suite.DOMAINS[self.domain].TASKS[self.task_name]
+            factory = suite.domain(self.domain).TASKS[self.task_name]
             time_limit = inspect.signature(factory).parameters["time_limit"].default
         # dm_control's own float expression, so that the count matches exactly.
         return time_limit / (self.physics.timestep() * self.n_sub)

@@ -18,3 +18,13 @@ class ZeroTorque:
             return lambda states: np.full(len(states), middle)
         value = target.action_values[middle]
         return lambda states: np.repeat(value[None], len(states), axis=0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Broken:
+    """Fails in every worker, on purpose: a run with it must not look successful."""
+
+    name: str = "broken"
+
+    def learn(self, problem, target_samples):
+        raise RuntimeError("deliberately broken plug-in")

@@ -218,3 +218,72 @@ def test_run_with_an_unknown_method_says_so_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and not out.exists(), err
     assert "unknown method 'ta-tl-h-no-cart' for ip_to_flipped_ip; valid methods: ['ta-tl', 'uma-tl', 'rl', " in err
+
+
+def test_run_with_a_failing_unit_exits_non_zero_with_one_line(tmp_path, capsys):
+    # tests/plugin_method.py's Broken raises in its worker: rl still finishes, nothing is lost,
+    # and the run ends with 1 and one line saying how many units failed and where to look.
+    spec = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    args = ["run", str(spec), "--preset", "tiny", "--seeds", "1", "--workers", "1", "--out", str(out)]
+    code = cli.main([*args, "--methods", "rl,plugin_method:Broken"])
+    captured = capsys.readouterr()
+    assert code == 1
+    last = captured.err.strip().splitlines()[-1]
+    assert last == (
+        f"tatl run: 1 of 3 work units did not finish (1 failed); tracebacks in {out / 'failures'}/; "
+        "rerun the same command to retry them"
+    )
+    assert "Traceback" not in captured.err
+    traceback = (out / "failures" / "ip_to_flipped_ip__seed0__broken.txt").read_text()
+    assert "deliberately broken plug-in" in traceback
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["seeds"] == [0]
+    # The rerun retries only the failed unit; without it, the run succeeds and exits 0.
+    assert cli.main([*args, "--methods", "rl"]) == 0
+
+
+def test_run_with_a_bad_user_domain_is_one_line(tmp_path, capsys):
+    import plugin_domain
+
+    spec = tmp_path / "mine.toml"
+    spec.write_text(plugin_domain.SPEC.replace('"plugin_domain:point_mass"', '"plugin_domain:pointmass"', 1))
+    code = cli.main(["run", str(spec), "--preset", "tiny", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and not (tmp_path / "out").exists(), err
+    assert err == (
+        f"tatl run: {spec}: key 'source.domain': domain 'plugin_domain:pointmass': module 'plugin_domain' "
+        "has no attribute 'pointmass'\n"
+    )
+
+
+def test_run_with_a_wrong_ray_address_is_one_line_and_touches_nothing(tmp_path, capsys):
+    # Nothing listens at the address (a port just freed, on loopback): one line at once, not
+    # Ray's minutes of retries, and the output folder is never made.
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    out = tmp_path / "out"
+    base = [
+        "run",
+        str(write_tiny(tmp_path)),
+        "--preset",
+        "tiny",
+        "--seeds",
+        "1",
+        "--out",
+        str(out),
+        "--executor",
+        "ray",
+    ]
+    code = cli.main([*base, "--address", f"127.0.0.1:{port}"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err and not out.exists(), err
+    assert err.startswith(f"tatl run: no Ray cluster answers at --address 127.0.0.1:{port} (Connection refused); ")
+    code = cli.main([*base, "--address", "127.0.0.1"])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (
+        "tatl run: --address '127.0.0.1': expected host:port (e.g. 127.0.0.1:6379), 'auto' or ray://host:port\n"
+    )

@@ -1,4 +1,6 @@
-"""docs/extending.md: every Python block runs as a script, as a reader would run it."""
+"""docs/extending.md: every Python block runs as a script, as a reader would run it:
+saved on its own in an empty folder outside the repository (under the file name
+its first line gives, if any) and run from there, with only the package importable."""
 
 import os
 import re
@@ -17,13 +19,27 @@ def test_the_page_has_its_three_examples():
 
 
 @pytest.mark.parametrize("index", range(len(BLOCKS)), ids=["spec", "method", "domain"][: len(BLOCKS)])
-def test_example_runs(index, tmp_path):
-    script = tmp_path / "example.py"
-    script.write_text(BLOCKS[index])
-    env = {**os.environ, "MUJOCO_GL": "disable", "PYTHONPATH": str(ROOT)}
+def test_example_runs_from_any_folder(index, tmp_path):
+    block = BLOCKS[index]
+    named = re.match(r"# (\w+\.py)\n", block)
+    folder = tmp_path / "mine"  # a user's own folder: nothing of the repository in it or above it
+    folder.mkdir()
+    script = folder / (named.group(1) if named else "example.py")
+    script.write_text(block)
+    # Only the package is importable (as an installed one would be); not the repository's
+    # folders, nor the folder the test runs from.
+    scratch = tmp_path / "tmp"  # where the examples' temporary folders go (tempfile honours TMPDIR)
+    scratch.mkdir()
+    env = {
+        **os.environ,
+        "MUJOCO_GL": "disable",
+        "PYTHONPATH": str(ROOT),
+        "PYTHONDONTWRITEBYTECODE": "1",
+        "TMPDIR": str(scratch),
+    }
     done = subprocess.run(
-        [sys.executable, str(script)],
-        cwd=ROOT if index == 1 else tmp_path,
+        [sys.executable, script.name],
+        cwd=folder,
         env=env,
         capture_output=True,
         text=True,
@@ -31,3 +47,5 @@ def test_example_runs(index, tmp_path):
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip(), "the example printed nothing"
+    assert sorted(p.name for p in folder.iterdir()) == [script.name], "the example wrote into the folder it ran from"
+    assert f"records in {scratch}" in done.stdout, done.stdout  # under the temporary folder

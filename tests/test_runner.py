@@ -11,6 +11,7 @@ import tomllib
 
 import numpy as np
 import pytest
+import threadpoolctl
 from conftest import ROOT, TINY, tiny_spec, write_tiny
 
 from tatl_mj.experiments import records, runner
@@ -50,12 +51,54 @@ def test_mixing_presets_in_one_folder_is_refused(tmp_path):
 
 
 def test_a_failing_experiment_does_not_take_the_others_down(tmp_path):
+    # ... and the run does not look successful: it raises once the others finished.
     good, bad = tiny_spec(), tiny_spec(no_such_option=1)
-    summary = runner.run([good, bad], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
+    stale = records.RunDirectory(tmp_path).failure_path(good.name, 0, "rl")
+    stale.parent.mkdir(parents=True)
+    stale.write_text("an earlier run's traceback")
+    with pytest.raises(runner.RunFailed) as caught:
+        runner.run([good, bad], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
+    error = caught.value
+    summary = error.summary
     assert summary["experiments"]["ip_to_flipped_ip"]["methods"]["rl"]["final_return"]
     assert any("ip_to_flipped_ip_broken" in f for f in summary["failures"])
+    assert json.loads((tmp_path / "summary.json").read_text())["failures"] == summary["failures"]
     failure = (tmp_path / "failures" / "ip_to_flipped_ip_broken__seed0__source.txt").read_text()
     assert "no_such_option" in failure
+    assert not stale.exists(), "a unit that now finished keeps no traceback"
+    assert (error.failed, error.skipped, error.total) == (1, 1, 4)
+    assert str(error) == (
+        f"2 of 4 work units did not finish (1 failed, 1 skipped as their source unit failed); "
+        f"tracebacks in {tmp_path / 'failures'}/; rerun the same command to retry them"
+    )
+
+
+def test_a_user_domain_and_method_by_import_path_run_with_any_number_of_workers(tmp_path):
+    # tests/plugin_domain.py is no part of the package: the spec names it "plugin_domain:point_mass",
+    # and its method "zero" as "plugin_method:ZeroTorque"; each worker process imports them itself.
+    import plugin_domain
+
+    from tatl_mj import suite
+
+    experiment = spec_mod.parse_spec(tomllib.loads(plugin_domain.SPEC), "point_mass.toml")
+    assert "plugin_domain:point_mass" not in suite.DOMAINS  # nothing registered in this process
+    summaries = {
+        workers: runner.run([experiment], "tiny", [0, 1], tmp_path / str(workers), workers=workers, progress=False)
+        for workers in (1, 2)
+    }
+    for workers, summary in summaries.items():
+        assert summary["failures"] == [], workers
+        assert list(summary["experiments"][experiment.name]["methods"]) == ["ta-tl", "rl", "zero"]
+    for name in ("source", "ta-tl", "rl", "zero"):
+        for seed in (0, 1):
+            one, two = (
+                records.read_json(records.RunDirectory(tmp_path / str(w)).record_path(experiment.name, seed, name))
+                for w in (1, 2)
+            )
+            if name == "source":
+                assert one["random_return"] == two["random_return"]
+            else:
+                assert [p["returns"] for p in one["curve"]] == [p["returns"] for p in two["curve"]], name
 
 
 def test_killed_run_resumes_without_losing_finished_units(tmp_path):
@@ -93,6 +136,20 @@ def test_killed_run_resumes_without_losing_finished_units(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     for method in summary["experiments"]["ip_to_flipped_ip"]["methods"].values():
         assert method["seeds"] == [0, 1]
+
+
+def test_every_unit_computes_on_one_blas_thread(monkeypatch):
+    # As Ray runs a one-CPU task: the records do not depend on the executor or the core count.
+    seen = []
+
+    def learn_source(*args):
+        seen.append({pool["internal_api"]: pool["num_threads"] for pool in threadpoolctl.threadpool_info()})
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(runner.pipeline, "learn_source", learn_source)
+    result = runner.work(tiny_spec(), "tiny", runner.Unit("ip_to_flipped_ip", 0, "source"), None)
+    assert "stop here" in result["error"]
+    assert seen and all(n == 1 for n in seen[0].values()), seen
 
 
 def test_atomic_write_keeps_the_old_file_on_failure(tmp_path, monkeypatch):
@@ -156,7 +213,8 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
     for name in spec.methods:
         recorded = json.loads(records.RunDirectory(tmp_path).record_path(spec.name, 0, name).read_text())
         policy = clips.clip_policy(spec, "tiny", 0, name, artifacts)
-        returns, _ = pipeline.evaluate(spec, preset, policy, pipeline.derive_seed(0, spec.name, "evaluation"))
+        with threadpoolctl.threadpool_limits(limits=1):  # as the runner's units compute
+            returns, _ = pipeline.evaluate(spec, preset, policy, pipeline.derive_seed(0, spec.name, "evaluation"))
         assert list(returns) == recorded["curve"][-1]["returns"], name
         states = artifacts.target_stream.states[:50]
         again = clips.clip_policy(spec, "tiny", 0, name, artifacts)

@@ -164,3 +164,92 @@ def test_methods_from_spec_builds_what_workers_run():
     pendulum = spec_mod.load_spec(TASKS[0].parent / "ip_to_flipped_ip.toml")
     smoke = pendulum.preset("smoke")
     assert spec_mod.methods_from_spec(pendulum, smoke)["ta-tl"].batch == min(smoke.target_budgets)
+
+
+# --- a user's own domain and method, by import path ---------------------------------
+
+
+def _point_mass() -> dict:
+    import plugin_domain  # tests/plugin_domain.py: a domain no part of the package
+
+    return tomllib.loads(plugin_domain.SPEC)
+
+
+def test_a_user_domain_and_method_by_import_path_load():
+    spec = spec_mod.parse_spec(_point_mass(), "mine.toml")
+    assert spec.source.domain == spec.target.domain == "plugin_domain:point_mass"
+    built = spec_mod.methods_from_spec(spec, spec.preset("tiny"))
+    assert type(built["zero"]).__name__ == "ZeroTorque" and built["zero"].name == "zero"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda t: t["source"].__setitem__("domain", "no_such_module:point_mass"),
+            "bad.toml: key 'source.domain': domain 'no_such_module:point_mass': cannot import module "
+            "'no_such_module' (ModuleNotFoundError: No module named 'no_such_module'); it must be importable "
+            "here and in every worker (PYTHONPATH or installed)",
+        ),
+        (
+            lambda t: t["target"].__setitem__("domain", "plugin_domain:pointmass"),
+            "bad.toml: key 'target.domain': domain 'plugin_domain:pointmass': module 'plugin_domain' has no "
+            "attribute 'pointmass'",
+        ),
+        (
+            lambda t: t["target"].__setitem__("domain", "plugin_domain:NOT_A_DOMAIN"),
+            "bad.toml: key 'target.domain': 'plugin_domain:NOT_A_DOMAIN' is not a domain: it needs TASKS, "
+            "a non-empty table of task name -> factory, got none",
+        ),
+        (
+            lambda t: t["target"].__setitem__("domain", "point_mass"),
+            "bad.toml: key 'target.domain': unknown domain 'point_mass'; valid domains: ['bicycle', 'cartpole', "
+            "'gridworld', 'mountain_car', 'pendulum'], or your own as 'module:attribute'",
+        ),
+        (
+            lambda t: t["target"].__setitem__("task", "reach_up"),
+            "bad.toml: key 'target.task' is 'reach_up'; valid tasks: ['reach', 'reach_flipped']",
+        ),
+        (
+            lambda t: t["methods"]["zero"].__setitem__("method", "no_such_module:Zero"),
+            "bad.toml: key 'methods.zero': method 'no_such_module:Zero': cannot import module 'no_such_module' "
+            "(ModuleNotFoundError: No module named 'no_such_module'); it must be importable here and in every "
+            "worker (PYTHONPATH or installed)",
+        ),
+        (
+            lambda t: t["methods"]["zero"].__setitem__("method", "plugin_method:Zero"),
+            "bad.toml: key 'methods.zero': method 'plugin_method:Zero': module 'plugin_method' has no attribute 'Zero'",
+        ),
+        (
+            lambda t: t["methods"]["zero"].__setitem__("method", "plugin_domain:point_mass"),
+            "bad.toml: key 'methods.zero': method 'plugin_domain:point_mass' is not a TransferMethod "
+            "(needs a name and learn(problem, samples))",
+        ),
+        (
+            lambda t: t["methods"]["zero"].__setitem__("gain", 0.5),
+            "bad.toml: key 'methods.zero': method 'plugin_method:ZeroTorque': ZeroTorque(**settings) failed: "
+            "ZeroTorque.__init__() got an unexpected keyword argument 'gain'",
+        ),
+        (
+            lambda t: t["methods"].__setitem__("rl", {"method": "plugin_method:ZeroTorque"}),
+            "bad.toml: key 'methods.rl': method 'rl' is a built-in; your own method 'plugin_method:ZeroTorque' "
+            "needs a table name of its own",
+        ),
+    ],
+    ids=[
+        "domain-module",
+        "domain-attribute",
+        "not-a-domain",
+        "unknown-domain",
+        "user-task",
+        "method-module",
+        "method-attribute",
+        "not-a-method",
+        "method-setting",
+        "method-built-in-name",
+    ],
+)
+def test_a_bad_import_path_is_one_line_naming_the_key(edit, message):
+    table = _point_mass()
+    edit(table)
+    assert _error(table) == message

@@ -4,7 +4,9 @@ It reuses a finished ``tatl run`` folder when given one (the source policy,
 mapping and target data of that seed), and otherwise trains what it needs at
 the chosen preset. The policy is the one the method learns from the preset's
 largest target-sample budget, built by the same call as in evaluation
-(``pipeline.learned_policy``), so the clip shows the evaluated policy.
+(``pipeline.learned_policy``), so the clip shows the evaluated policy; and,
+as in the runner's units, with BLAS and OpenMP on one thread, so that it
+computes the same numbers.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import threadpoolctl
 
 from tatl_mj import render, suite
 from tatl_mj.experiments import pipeline
@@ -43,7 +46,8 @@ def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artif
     transfer = methods_from_spec(spec, chosen, [method])[method]
     with warnings.catch_warnings(record=True) as caught:  # e.g. Algorithm 2's rule not met: one line each
         warnings.simplefilter("always")
-        policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+        with threadpoolctl.threadpool_limits(limits=1):  # as runner.work computes
+            policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
     for message in sorted({str(w.message) for w in caught}):
         print(f"note: {message}")
     return policy
@@ -68,9 +72,26 @@ def render_from_spec(
         raise ValueError(f"clip path must end in one of {render.CLIP_EXTENSIONS}, got {out!r}")
     spec = load_spec(spec_path)
     spec.preset(preset)  # an unknown preset fails here, naming the valid ones
-    target = spec.target
     if method != RANDOM and method not in spec.methods:
         raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
+    with threadpoolctl.threadpool_limits(limits=1):  # as runner.work computes
+        return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
+
+
+def _render(
+    spec: ExperimentSpec,
+    method: str,
+    seed: int,
+    out: str,
+    seconds: float,
+    width: int,
+    height: int,
+    fps: int,
+    preset: str,
+    run_dir: str | None,
+    with_source: bool,
+) -> Path:
+    target = spec.target
     needs_artifacts = method != RANDOM or with_source
     artifacts = _artifacts(spec, preset, seed, run_dir) if needs_artifacts else None
     policy = clip_policy(spec, preset, seed, method, artifacts)

@@ -6,7 +6,16 @@ reused by every method). Phase two, per (experiment, seed, method): one
 method's learning curve. Workers return their results; only this process
 writes, each record atomically, so a crash or a kill loses no finished unit
 and a rerun of the same command resumes where it stopped. A failing unit is
-reported (traceback in DIR/failures/) and does not take the others down.
+reported (traceback in DIR/failures/) and does not take the others down; once
+every other unit has finished and the summary is written, :func:`run` raises
+:class:`RunFailed`, so a run with a failed unit never looks like a success.
+
+Every unit computes with its BLAS and OpenMP pools on one thread, as Ray runs a
+one-CPU task, so that a record depends on neither the executor nor the
+machine's core count: OpenBLAS on more threads sums in another order, and a
+decision at a threshold (Algorithm 2's stopping rule) can flip on the last bit
+(measured: the tiny flipped pendulum's seed 1, TA-TL -3,917 on two threads,
+-3,287 on one).
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
+import threadpoolctl
 from tqdm import tqdm
 
 from tatl_mj.experiments import lock, pipeline, reaper
@@ -39,6 +49,31 @@ SOURCE_UNIT = "source"
 
 class MethodError(ValueError):
     """A method asked for that a spec cannot run (raised before any work starts)."""
+
+
+class ExecutorError(RuntimeError):
+    """The executor cannot start: e.g. no Ray cluster answers at ``address`` (raised before any work)."""
+
+
+class RunFailed(RuntimeError):
+    """Units failed (or were skipped because their source unit failed).
+
+    Raised by :func:`run` only after every other unit finished, its record
+    written, and the summary written; ``summary`` is what :func:`run` would have
+    returned (its ``failures`` lists each unit), ``failed`` and ``skipped`` count
+    them, ``failures_dir`` holds the tracebacks. A rerun of the same command
+    retries exactly these units.
+    """
+
+    def __init__(self, summary: dict, failed: int, skipped: int, total: int, failures_dir: Path) -> None:
+        self.summary, self.failed, self.skipped, self.total = summary, failed, skipped, total
+        self.failures_dir = failures_dir
+        units = failed + skipped
+        parts = [f"{failed} failed"] + ([f"{skipped} skipped as their source unit failed"] if skipped else [])
+        super().__init__(
+            f"{units} of {total} work unit{'s' if total != 1 else ''} did not finish ({', '.join(parts)}); "
+            f"tracebacks in {failures_dir}/; rerun the same command to retry them"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,28 +100,36 @@ def work(
     """
     start = time.perf_counter()
     try:
-        preset = spec.preset(preset_name)
-        if unit.name == SOURCE_UNIT:
-            artifacts = pipeline.learn_source(spec, preset, unit.seed)
-            blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
-            record = {
-                "experiment": spec.name,
-                "seed": unit.seed,
-                "random_return": artifacts.random_return,
-                "source_samples": artifacts.source_samples,
-                "mapping_source_samples": artifacts.mapping_source_samples,
-                "mapping_target_samples": artifacts.mapping_target_samples,
-                "mapping": artifacts.mapping_record,
-                "timings": artifacts.timings,
-            }
-        else:
-            artifacts = pickle.loads(source_blob)
-            blob = None
-            record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
-        record["wall_s"] = time.perf_counter() - start
-        return {"record": record, "blob": blob}
+        with threadpoolctl.threadpool_limits(limits=1):  # the same numbers on every executor (module docstring)
+            return _work(spec, preset_name, unit, source_blob, transfer, start)
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
         return {"error": traceback.format_exc()}
+
+
+def _work(
+    spec: ExperimentSpec, preset_name: str, unit: Unit, source_blob: bytes | None, transfer: Any, start: float
+) -> dict:
+    """:func:`work`'s unit, which may raise."""
+    preset = spec.preset(preset_name)
+    if unit.name == SOURCE_UNIT:
+        artifacts = pipeline.learn_source(spec, preset, unit.seed)
+        blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
+        record = {
+            "experiment": spec.name,
+            "seed": unit.seed,
+            "random_return": artifacts.random_return,
+            "source_samples": artifacts.source_samples,
+            "mapping_source_samples": artifacts.mapping_source_samples,
+            "mapping_target_samples": artifacts.mapping_target_samples,
+            "mapping": artifacts.mapping_record,
+            "timings": artifacts.timings,
+        }
+    else:
+        artifacts = pickle.loads(source_blob)
+        blob = None
+        record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
+    record["wall_s"] = time.perf_counter() - start
+    return {"record": record, "blob": blob}
 
 
 # --- executors ------------------------------------------------------------------
@@ -121,6 +164,35 @@ def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
                 yield futures[future], result
 
 
+CONNECT_TIMEOUT_S = 10.0
+
+
+def check_address(address: str) -> None:
+    """Raises ExecutorError unless something accepts connections at a Ray ``address``.
+
+    ``ray.init`` retries an address where nothing listens for minutes (measured with
+    Ray 2.60); one TCP connection here, to the address given and nowhere else, says
+    at once. ``auto`` and ``local`` are left to Ray.
+    """
+    import socket
+
+    if address in ("auto", "local"):
+        return
+    where = address.split("://", 1)[-1]  # ray://host:port (Ray Client) or host:port
+    host, _, port = where.rpartition(":")
+    if not host or not port.isdigit():
+        raise ExecutorError(
+            f"--address {address!r}: expected host:port (e.g. 127.0.0.1:6379), 'auto' or ray://host:port"
+        )
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as error:
+        raise ExecutorError(
+            f"no Ray cluster answers at --address {address} ({error.strerror or error}); "
+            "start one there (ray start --head --port PORT) or give its address"
+        ) from None
+
+
 def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Unit, dict]]:
     try:
         import ray
@@ -137,7 +209,16 @@ def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[U
             kwargs["address"] = address
         else:
             kwargs["num_cpus"] = max(workers, 1)
-        ray.init(**kwargs)
+        try:
+            ray.init(**kwargs)
+        except Exception as error:  # noqa: BLE001 - Ray raises several kinds (ConnectionError, RuntimeError)
+            ray.shutdown()
+            if watcher is not None:
+                watcher.terminate()
+                watcher.wait()
+            first = (str(error).strip().splitlines() or [type(error).__name__])[0]
+            where = f"at {address}" if address else "(a local instance)"
+            raise ExecutorError(f"cannot start Ray {where}: {first}") from None
     try:
         remote = ray.remote(num_cpus=1)(work)
         refs = {remote.remote(*args): unit for unit, args in jobs}
@@ -220,6 +301,8 @@ def _plan(
 def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job]], Iterator[tuple[Unit, dict]]]:
     if executor not in EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
+    if executor == "ray" and address:
+        check_address(address)  # before the run touches its folder
     return (lambda jobs: _ray(jobs, workers, address)) if executor == "ray" else (lambda jobs: _local(jobs, workers))
 
 
@@ -229,22 +312,26 @@ class _Recorder:
     def __init__(self, run_dir: RunDirectory, done: set[Unit], bar: Any) -> None:
         self.run_dir, self.done, self.bar = run_dir, done, bar
         self.failures: list[str] = []
+        self.failed = self.skipped = 0
 
     def __call__(self, unit: Unit, result: dict) -> None:
         run_dir = self.run_dir
+        path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
         if "error" in result:
-            path = run_dir.failure_path(unit.experiment, unit.seed, unit.name)
             write_atomic(path, result["error"].encode())
             last = result["error"].strip().splitlines()[-1]
             self.failures.append(f"{unit}: {last} (see {path})")
+            self.failed += 1
             self.bar.write(f"FAILED {unit}: {last}")
         else:
             run_dir.write_unit(unit.experiment, unit.seed, unit.name, result["record"], result.get("blob"))
             self.done.add(unit)
+            path.unlink(missing_ok=True)  # an earlier run's traceback of this unit no longer applies
         self.bar.update(1)
 
     def skip(self, unit: Unit, why: str) -> None:
         self.failures.append(f"{unit}: skipped, {why}")
+        self.skipped += 1
         self.bar.update(1)
 
 
@@ -260,6 +347,9 @@ def run(
     progress: bool = True,
 ) -> dict:
     """Runs (or resumes) every unit; writes and returns the summary.
+
+    Raises :class:`RunFailed` (after every other unit finished and the summary was
+    written) if any unit failed or was skipped; nothing finished is lost.
 
     ``methods``: None runs each spec's own ``[methods]``; a list of names runs
     those built-ins; a dict maps names to method objects implementing
@@ -330,6 +420,8 @@ def _run_locked(
         failures=record.failures,
     )
     write_json(run_dir.summary, summary)
+    if record.failed or record.skipped:
+        raise RunFailed(summary, record.failed, record.skipped, len(all_units), run_dir.root / "failures")
     return summary
 
 

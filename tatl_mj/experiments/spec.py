@@ -8,6 +8,11 @@ factories the workers use (``suite.describe``, ``make_regressor``, the method
 constructors), so any unknown key (feature tables included), wrong type,
 impossible value or setting that a choice ignores stops the load with a message
 naming the file, the key path and what was expected. See ``tasks/*.toml``.
+
+A user's own code is named by import path, ``"module:attribute"``, and imported
+wherever the spec is used (here and in every worker): a side's ``domain``
+(``tatl_mj.suite.domain``), and a ``[methods.NAME]`` table's ``method`` key, a
+class built with the table's other settings (:func:`build_method`).
 """
 
 from __future__ import annotations
@@ -211,9 +216,10 @@ def _describe(spec: ExperimentSpec, side_name: str) -> Any:
     from tatl_mj import suite  # imports mujoco: only once the spec parsed
 
     p, side = spec.path, getattr(spec, side_name)
-    if side.domain not in suite.DOMAINS:
-        raise SpecError(f"{p}: key '{side_name}.domain' is {side.domain!r}; valid domains: {sorted(suite.DOMAINS)}")
-    tasks = suite.DOMAINS[side.domain].TASKS
+    try:
+        tasks = suite.domain(side.domain).TASKS  # a built-in, or "module:attribute" imported and checked
+    except suite.DomainError as error:
+        raise SpecError(f"{p}: key '{side_name}.domain': {error}") from None
     if side.task not in tasks:
         raise SpecError(f"{p}: key '{side_name}.task' is {side.task!r}; valid tasks: {sorted(tasks)}")
     try:
@@ -321,7 +327,7 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
         try:
-            method = registry.build(name, settings)
+            method = build_method(name, settings)
             check = getattr(method, "check", None)
             if check is not None:
                 check(source, target)
@@ -364,10 +370,79 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     out = {}
     for name in chosen:
         settings = dict(spec.methods.get(name, {}))
-        if "batch" in registry.settings_of(registry.base_of(name, settings)) and settings.get("batch") is None:
-            settings["batch"] = min(preset.target_budgets)
-        out[name] = registry.build(name, settings)
+        if plugin_path(settings) is None:
+            if "batch" in registry.settings_of(registry.base_of(name, settings)) and settings.get("batch") is None:
+                settings["batch"] = min(preset.target_budgets)
+        out[name] = build_method(name, settings)
     return out
+
+
+def plugin_path(settings: dict[str, Any]) -> str | None:
+    """The ``module:attribute`` a ``[methods.NAME]`` table's ``method`` key names, or None
+    (a built-in or a variant of one)."""
+    from tatl_mj.transfer import registry
+
+    base = settings.get(registry.VARIANT_KEY)
+    return base if isinstance(base, str) and ":" in base else None
+
+
+def _tuples(value: Any) -> Any:
+    """TOML arrays as tuples (method settings are frozen), tables left as dicts."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
+def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
+    """The method a ``[methods.NAME]`` table builds; ValueError (one line) if it cannot.
+
+    ``method = "module:attribute"`` names a user's own method: a class is called with
+    the table's other settings as keyword arguments (and ``name=NAME`` where its
+    constructor takes a ``name``); an instance takes no settings. It is imported in
+    the process that builds it, so each worker imports it too. Anything else is a
+    built-in or a variant of one (``tatl_mj.transfer.registry.build``).
+    """
+    import importlib
+    import inspect
+
+    from tatl_mj.transfer import registry
+    from tatl_mj.transfer.method import TransferMethod
+
+    settings = dict(settings or {})
+    path = plugin_path(settings)
+    if path is None:
+        return registry.build(name, settings)
+    if name in registry.METHODS:
+        raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
+    module_name, _, attribute = path.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as error:  # noqa: BLE001 - the user's module may raise anything on import
+        raise ValueError(
+            f"method {path!r}: cannot import module {module_name!r} ({type(error).__name__}: {error}); "
+            "it must be importable here and in every worker (PYTHONPATH or installed)"
+        ) from None
+    if not hasattr(module, attribute):
+        raise ValueError(f"method {path!r}: module {module_name!r} has no attribute {attribute!r}")
+    obj = getattr(module, attribute)
+    kwargs = {k: _tuples(v) for k, v in settings.items() if k != registry.VARIANT_KEY}
+    if isinstance(obj, type):
+        try:
+            parameters = inspect.signature(obj).parameters
+        except (TypeError, ValueError):
+            parameters = {}
+        takes_any = any(p.kind is p.VAR_KEYWORD for p in parameters.values())
+        if "name" in kwargs:
+            raise ValueError(f"method {path!r}: 'name' is the table's name ({name!r}), not a setting")
+        if "name" in parameters or takes_any:
+            kwargs["name"] = name
+        try:
+            obj = obj(**kwargs)
+        except TypeError as error:
+            raise ValueError(f"method {path!r}: {attribute}(**settings) failed: {error}") from None
+    elif kwargs:
+        raise ValueError(f"method {path!r} is an instance, not a class: it takes no settings, got {sorted(kwargs)}")
+    if not isinstance(obj, TransferMethod):
+        raise ValueError(f"method {path!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+    return obj
 
 
 def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:

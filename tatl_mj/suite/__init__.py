@@ -6,11 +6,22 @@
 
 Every task speaks dm_env. Physics tasks are ``dm_control.rl.control.Environment``
 instances whose observation is ``{"state": the paper's state vector}``.
+
+A domain is named by its key in ``DOMAINS`` (the built-ins) or, for a user's own,
+by an import path ``"module:attribute"`` (``"mypkg.domains:point_mass"``): the
+attribute is a module or any object that provides what a built-in domain module
+does (``TASKS``, ``describe``, ``ACTIONS``; see docs/extending.md). Every function
+here takes either; an import path is imported on first use in each process
+(so a worker process resolves it the same way as the process that started it)
+and checked against that contract (:func:`domain`).
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
 import inspect
+from collections.abc import Mapping
 from types import ModuleType
 from typing import Any
 
@@ -33,10 +44,68 @@ ALL_TASKS: tuple[tuple[str, str], ...] = tuple(
 )
 
 
-def _domain(name: str) -> ModuleType:
-    if name not in DOMAINS:
-        raise ValueError(f"unknown domain {name!r}; valid domains: {sorted(DOMAINS)}")
-    return DOMAINS[name]
+class DomainError(ValueError):
+    """A domain name that resolves to no domain; the message says what was expected."""
+
+
+def _valid_domains() -> str:
+    return f"valid domains: {sorted(DOMAINS)}, or your own as 'module:attribute'"
+
+
+def check_domain(obj: Any, name: str) -> None:
+    """Raises DomainError unless ``obj`` provides the domain contract: ``TASKS`` (a
+    non-empty table of task name -> factory), ``describe`` (callable) and ``ACTIONS``."""
+    tasks = getattr(obj, "TASKS", None)
+    if not isinstance(tasks, Mapping) or not tasks:
+        raise DomainError(
+            f"{name!r} is not a domain: it needs TASKS, a non-empty table of task name -> factory, "
+            f"got {type(tasks).__name__ if tasks is not None else 'none'}"
+        )
+    bad = [task for task, factory in tasks.items() if not isinstance(task, str) or not callable(factory)]
+    if bad:
+        raise DomainError(f"{name!r} is not a domain: TASKS[{bad[0]!r}] must be a callable factory under a str name")
+    if not callable(getattr(obj, "describe", None)):
+        raise DomainError(f"{name!r} is not a domain: it needs describe(task, **task_kwargs) -> TaskDescription")
+    if getattr(obj, "ACTIONS", None) is None:
+        raise DomainError(f"{name!r} is not a domain: it needs ACTIONS, the discrete action set")
+
+
+@functools.lru_cache(maxsize=None)  # per process; a failed import is not cached (it raised)
+def _imported(path: str) -> Any:
+    module_name, _, attribute = path.partition(":")
+    if not module_name or not attribute:
+        raise DomainError(f"domain {path!r}: an import path must be 'module:attribute'; {_valid_domains()}")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as error:  # noqa: BLE001 - the user's module may raise anything on import
+        raise DomainError(
+            f"domain {path!r}: cannot import module {module_name!r} ({type(error).__name__}: {error}); "
+            "it must be importable here and in every worker (PYTHONPATH or installed)"
+        ) from None
+    if not hasattr(module, attribute):
+        raise DomainError(f"domain {path!r}: module {module_name!r} has no attribute {attribute!r}")
+    obj = getattr(module, attribute)
+    check_domain(obj, path)
+    return obj
+
+
+def domain(name: str) -> Any:
+    """The domain module (or object) named ``name``: a key of ``DOMAINS`` or ``"module:attribute"``.
+
+    Raises DomainError (a ValueError) with one line: an unknown name (listing the
+    valid ones), a module that cannot be imported, a missing attribute, or an
+    object that is not a domain (:func:`check_domain`).
+    """
+    if not isinstance(name, str):
+        raise DomainError(f"a domain name must be a string, got {name!r}")
+    if name in DOMAINS:
+        return DOMAINS[name]
+    if ":" in name:
+        return _imported(name)
+    raise DomainError(f"unknown domain {name!r}; {_valid_domains()}")
+
+
+_domain = domain
 
 
 def _factory(domain: str, task: str) -> Any:
