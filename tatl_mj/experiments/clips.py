@@ -4,9 +4,7 @@ It reuses a finished ``tatl run`` folder when given one (the source policy,
 mapping and target data of that seed), and otherwise trains what it needs at
 the chosen preset. The policy is the one the method learns from the preset's
 largest target-sample budget, built by the same call as in evaluation
-(``pipeline.learned_policy``), so the clip shows the evaluated policy; and,
-as in the runner's units, with BLAS and OpenMP on one thread, so that it
-computes the same numbers.
+(``pipeline.learned_policy``), so the clip shows the evaluated policy.
 """
 
 from __future__ import annotations
@@ -17,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import threadpoolctl
 
 from tatl_mj import render, suite
 from tatl_mj.experiments import pipeline
@@ -46,8 +43,7 @@ def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artif
     transfer = methods_from_spec(spec, chosen, [method])[method]
     with warnings.catch_warnings(record=True) as caught:  # e.g. Algorithm 2's rule not met: one line each
         warnings.simplefilter("always")
-        with threadpoolctl.threadpool_limits(limits=1):  # as runner.work computes
-            policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+        policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
     for message in sorted({str(w.message) for w in caught}):
         print(f"note: {message}")
     return policy
@@ -74,8 +70,7 @@ def render_from_spec(
     spec.preset(preset)  # an unknown preset fails here, naming the valid ones
     if method != RANDOM and method not in spec.methods:
         raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
-    with threadpoolctl.threadpool_limits(limits=1):  # as runner.work computes
-        return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
+    return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
 
 
 def _render(

@@ -10,12 +10,10 @@ reported (traceback in DIR/failures/) and does not take the others down; once
 every other unit has finished and the summary is written, :func:`run` raises
 :class:`RunFailed`, so a run with a failed unit never looks like a success.
 
-Every unit computes with its BLAS and OpenMP pools on one thread, as Ray runs a
-one-CPU task, so that a record depends on neither the executor nor the
-machine's core count: OpenBLAS on more threads sums in another order, and a
-decision at a threshold (Algorithm 2's stopping rule) can flip on the last bit
-(measured: the tiny flipped pendulum's seed 1, TA-TL -3,917 on two threads,
--3,287 on one).
+A unit computes with the BLAS threads its process has: a local worker uses
+OpenBLAS's default, a Ray task of one CPU one thread, and a decision at a
+threshold (Algorithm 2's stopping rule) can flip on the last bit of a sum, so
+records of the two executors can differ (docs/protocol.md, "Across machines").
 """
 
 from __future__ import annotations
@@ -32,7 +30,6 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-import threadpoolctl
 from tqdm import tqdm
 
 from tatl_mj.experiments import lock, pipeline, reaper
@@ -100,8 +97,7 @@ def work(
     """
     start = time.perf_counter()
     try:
-        with threadpoolctl.threadpool_limits(limits=1):  # the same numbers on every executor (module docstring)
-            return _work(spec, preset_name, unit, source_blob, transfer, start)
+        return _work(spec, preset_name, unit, source_blob, transfer, start)
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
         return {"error": traceback.format_exc()}
 
