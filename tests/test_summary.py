@@ -164,3 +164,12 @@ def test_counted_area_is_a_step_function_of_counted_transitions():
     area = summary.counted_area(np.array([[1000, 1000]]), np.array([[1.0, 1.0]]), 100, 10000)
     assert area[0] == pytest.approx(0.5, abs=0.01)
     assert summary.counted_area(np.array([[100, 10000]]), np.array([[1.0, 1.0]]), 100, 10000)[0] == 1.0
+
+
+def test_survival_is_kaplan_meier_over_the_compared_seeds_at_the_largest_budget():
+    exp = experiment({"a": {0: [1.0, 2.0], 1: [1.0, 2.0]}}, {0: 0.0, 1: 0.0})
+    exp["methods"]["a"]["final_steps"] = {"0": [3, 10], "1": [5, 10]}  # cap 10: two fell, two did not
+    summary._survival(exp, 10)
+    got = exp["methods"]["a"]["survival"]
+    assert got["steps"] == [3.0, 5.0] and got["episodes"] == 4
+    assert got["probability"] == pytest.approx([3 / 4, 3 / 4 * 2 / 3]) and got["at_cap"] == pytest.approx(0.5)

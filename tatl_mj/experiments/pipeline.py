@@ -590,6 +590,7 @@ def run_method(
                 "mean_return": float(np.mean(returns)),
                 "returns": [float(r) for r in returns],
                 "mean_steps": float(np.mean(lengths)),
+                "steps": [int(n) for n in lengths],  # per episode: survival where episodes are capped
                 "learn_s": learn_s,
                 # e.g. Algorithm 2's stopping rule not met within the budget
                 "warnings": sorted({str(w.message) for w in caught}),

@@ -214,6 +214,14 @@ def table(summary: dict) -> str:
         if any(verdicts):
             lines += ["", "Transfer against its ablation without the source:", ""]
             lines += [f"- {v}" for v in verdicts if v]
+        survived = {m: d["survival"] for m, d in exp["methods"].items() if "survival" in d}
+        if survived:
+            parts = [f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes)" for m, v in survived.items()]
+            lines += [
+                "",
+                "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
+                "compared seeds; only methods with an episode that ended early): " + "; ".join(parts) + ".",
+            ]
         best = exp.get("best_baseline")
         if exp.get("vs_best_baseline"):
             lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]

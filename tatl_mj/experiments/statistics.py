@@ -142,6 +142,19 @@ def area_under_curve(budgets: Sequence[float], scores: np.ndarray) -> np.ndarray
     return np.trapezoid(y, x, axis=-1) / (x[-1] - x[0])
 
 
+def survival(lengths: Sequence[float], cap: float) -> tuple[np.ndarray, np.ndarray]:
+    """Kaplan-Meier survival of episode lengths censored at ``cap`` (an episode that
+    reaches the cap did not end): the distinct end times and S(t) just after each."""
+    lengths = np.asarray(lengths, dtype=np.float64)
+    ended, capped = lengths[lengths < cap], lengths[lengths >= cap]
+    if len(ended) == 0:
+        return np.array([]), np.array([])
+    result = scipy.stats.ecdf(scipy.stats.CensoredData(uncensored=ended, right=capped))
+    times, probabilities = np.asarray(result.sf.quantiles), np.asarray(result.sf.probabilities)
+    ends = times < cap  # the censoring time is no end
+    return times[ends], probabilities[ends]
+
+
 def performance_profile(scores: np.ndarray, taus: np.ndarray) -> np.ndarray:
     """The fraction of runs whose normalised score exceeds each tau."""
     s = np.asarray(scores, dtype=np.float64).ravel()
@@ -160,5 +173,6 @@ __all__ = [
     "iqm_interval",
     "normalised",
     "performance_profile",
+    "survival",
     "verdict",
 ]

@@ -317,6 +317,10 @@ def _experiment(
                 "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
             },
             "data": recs[seeds_done[0]].get("data", "shared"),
+            # Per seed, each evaluation episode's steps at the largest budget (records that have them).
+            "final_steps": {
+                str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]
+            },
             "extra": {
                 k: [recs[s].get(k) for s in seeds_done]
                 for k in ("algorithm2_samples",)
@@ -378,6 +382,27 @@ def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float
         last = np.searchsorted(c, grid, side="right") - 1
         out[i] = np.mean(np.where(last >= 0, y[np.maximum(last, 0)], 0.0))
     return out
+
+
+def _survival(experiment: dict, cap: int | None) -> None:
+    """Kaplan-Meier survival of each method's evaluation episodes at its largest budget, pooled
+    over the compared seeds and censored at the episode cap, where any episode ended early."""
+    if cap is None:
+        return
+    seeds = list(compare(experiment).seeds)
+    for data in experiment["methods"].values():
+        steps = [data.get("final_steps", {}).get(str(s)) for s in seeds]
+        if not seeds or any(v is None for v in steps):
+            continue
+        lengths = np.concatenate([np.asarray(v, dtype=np.float64) for v in steps])
+        times, probability = stats.survival(lengths, cap)
+        if len(times):
+            data["survival"] = {
+                "steps": times.tolist(),
+                "probability": probability.tolist(),
+                "at_cap": float(probability[-1]),
+                "episodes": int(len(lengths)),
+            }
 
 
 def _statistics(experiment: dict, spec: dict) -> None:
@@ -478,6 +503,7 @@ def build(
         reference = ((spec.get("presets") or {}).get(preset) or {}).get("reference_return")
         experiment = _experiment(run_dir, spec["name"], seeds, own, reference)
         _statistics(experiment, spec)
+        _survival(experiment, ((spec.get("presets") or {}).get(preset) or {}).get("evaluation_steps"))
         experiments[spec["name"]] = {**experiment, "spec": spec}
     return {
         "experiments": experiments,
