@@ -149,6 +149,10 @@ def _run(args: argparse.Namespace) -> int:
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
+    from tatl_mj.experiments import summary as summary_mod
+
+    for line in summary_mod.notes(summary):
+        print(line)
     if failed is not None:  # one line; each unit's is in summary.json's "failures" and its traceback file
         print(f"tatl run: {failed}", file=sys.stderr)
         return 1

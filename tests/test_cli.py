@@ -287,3 +287,11 @@ def test_run_with_a_wrong_ray_address_is_one_line_and_touches_nothing(tmp_path, 
     assert code == 2 and err == (
         "tatl run: --address '127.0.0.1': expected host:port (e.g. 127.0.0.1:6379), 'auto' or ray://host:port\n"
     )
+
+
+def test_a_built_in_that_cannot_run_on_a_spec_is_refused_before_any_work(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = cli.main(["run", "tasks/ip_to_flipped_ip.toml", "--methods", "ta-tl-replan", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and not out.exists(), err
+    assert "method 'ta-tl-replan' cannot run on ip_to_flipped_ip: ReplanTATL plans over cells" in err

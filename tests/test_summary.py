@@ -173,3 +173,11 @@ def test_survival_is_kaplan_meier_over_the_compared_seeds_at_the_largest_budget(
     got = exp["methods"]["a"]["survival"]
     assert got["steps"] == [3.0, 5.0] and got["episodes"] == 4
     assert got["probability"] == pytest.approx([3 / 4, 3 / 4 * 2 / 3]) and got["at_cap"] == pytest.approx(0.5)
+
+
+def test_stopping_rule_notes_are_one_line_per_experiment_with_their_meaning():
+    exp = experiment({"ta-tl": {0: [1.0, 2.0], 1: [1.0, 2.0]}}, {0: 0.0, 1: 0.0})
+    exp["algorithm2_not_met"] = {"ta-tl": [1]}
+    lines = summary.notes({"experiments": {"flip": exp, "other": experiment({"rl": {0: [1.0, 1.0]}}, {0: 0.0})}})
+    assert len(lines) == 1 and lines[0].startswith("note: flip: Algorithm 2's stopping rule")
+    assert "ta-tl on 1 of 2 seeds" in lines[0] and "not an error" in lines[0]

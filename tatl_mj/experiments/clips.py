@@ -45,7 +45,12 @@ def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artif
         warnings.simplefilter("always")
         policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
     for message in sorted({str(w.message) for w in caught}):
-        print(f"note: {message}")
+        meaning = (
+            " (the apprentice then uses every sample: expected where the model never matches the target closely)"
+            if "stopping rule" in message
+            else ""
+        )
+        print(f"note: {message}{meaning}")
     return policy
 
 

@@ -290,8 +290,23 @@ def _plan(
                     "(the methods its spec lists; other built-ins run with their default settings, "
                     "plug-ins as module:Class)"
                 )
+            if name not in custom and name not in spec.methods:
+                _check_applies(spec, name)
         units += [Unit(spec.name, seed, name) for seed in seeds for name in [SOURCE_UNIT, *names]]
     return units, custom
+
+
+def _check_applies(spec: ExperimentSpec, name: str) -> None:
+    """A built-in the spec does not list runs with its defaults: refuse it now if it cannot
+    run on the spec's tasks (a grid planner on a pendulum), naming why."""
+    method = registry.build(name)
+    check = getattr(method, "check", None)
+    if check is None:
+        return
+    try:
+        check(pipeline.describe(spec.source), pipeline.describe(spec.target))
+    except ValueError as error:
+        raise MethodError(f"method {name!r} cannot run on {spec.name}: {error}") from None
 
 
 def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job]], Iterator[tuple[Unit, dict]]]:

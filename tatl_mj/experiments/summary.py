@@ -329,7 +329,15 @@ def _experiment(
             "wall_s": [recs[s].get("wall_s") for s in seeds_done],
         }
     source_seeds = sorted(sources)
+    # Per method, the seeds on which Algorithm 2's stopping rule was not met within some budget.
+    unmet = {
+        m: sorted(
+            s for s, r in recs.items() if any(STOPPING_RULE in w for p in r["curve"] for w in p.get("warnings", []))
+        )
+        for m, recs in records.items()
+    }
     experiment: dict[str, Any] = {
+        "algorithm2_not_met": {m: seeds for m, seeds in unmet.items() if seeds},
         "reference_return": reference,
         "methods": out_methods,
         "source_seeds": source_seeds,
@@ -363,6 +371,22 @@ def _experiment(
 
 
 AUC_POINTS = 256
+STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met warning
+
+
+def notes(summary: dict) -> list[str]:
+    """One line per experiment where Algorithm 2's stopping rule was not met, saying what it means."""
+    lines = []
+    for name, exp in summary["experiments"].items():
+        unmet = exp.get("algorithm2_not_met") or {}
+        if unmet:
+            counts = ", ".join(f"{m} on {len(s)} of {len(exp['methods'][m]['seeds'])} seeds" for m, s in unmet.items())
+            lines.append(
+                f"note: {name}: Algorithm 2's stopping rule (U_M - U_Mhat <= zeta) was not met within some "
+                f"budget ({counts}); the apprentice then uses every sample of that budget, as counted: "
+                "expected where the model never matches the target closely, not an error"
+            )
+    return lines
 
 
 def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float) -> np.ndarray:
