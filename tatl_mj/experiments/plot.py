@@ -537,7 +537,7 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
     ncol = min(3, len(handles))
     legend = fig.legend(handles=handles, loc="upper center", ncol=ncol, fontsize=8, frameon=False)
-    caption = _caption(comparison, clipped_values)
+    caption = _caption(comparison, clipped_values, experiment.get("reference_return"))
     caption_lines = caption.count("\n") + 1
     legend_rows = math.ceil(len(handles) / ncol)
     # Room under the panels for tick labels, the legend and the caption, in inches.
@@ -561,15 +561,20 @@ def _wrap(label: str) -> str:
     return "\n".join(textwrap.wrap(label, width=14)) or label
 
 
-def _caption(comparison: Comparison, clipped_values: list[float]) -> str:
+def _caption(comparison: Comparison, clipped_values: list[float], reference: float | None = None) -> str:
     seeds = f"seeds {list(comparison.seeds)}"
     parts = [f"Compared over {seeds}."]
     if comparison.meaningful:
+        rule = (
+            f"90% x (reference return {reference:.4g} - random-policy return)"
+            if reference is not None
+            else f"{THRESHOLD_FRACTION:.0%} x (best method's mean final return - random-policy return)"
+        )
         parts.append(
-            f"Threshold (dashed) = random-policy return + {THRESHOLD_FRACTION:.0%} x (best method's mean final "
-            f"return - random-policy return) = {comparison.threshold:.4g}. (b) A seed's samples to threshold: "
-            "the smallest budget from which its return stays at or above the threshold for every larger "
-            "budget; seeds that never stay there are on the 'never' row."
+            f"Threshold (dashed) = random-policy return + {rule} = {comparison.threshold:.4g}. (a) Each seed at "
+            "the target transitions it counted (samples, Algorithm 2's rollouts, its own data). (b) A seed's "
+            "target transitions to threshold: those counted at the smallest budget from which its return stays "
+            "at or above the threshold for every larger budget; seeds that never stay there are on the 'never' row."
         )
     else:
         parts.append(
