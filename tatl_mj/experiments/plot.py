@@ -45,6 +45,7 @@ LABELS = {"ta-tl": "TA-TL (paper, Alg. 1)", "uma-tl": "UMA-TL", "rl": "RL (no tr
 # none is close to the fixed ones or to the grey/black reference lines.
 PALETTE = ("#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#393b79", "#7b4173", "#e7ba52", "#008080")
 REFERENCE_METHOD = "ta-tl"  # the table's "vs" column divides by this method's median
+LINE_STYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))  # cycled, so overlapping curves both show
 RETURN_LABEL = "return (undiscounted episode sum)"  # the y-axis of every return panel
 CLIP_SCALES = 6.0  # values beyond this many robust spreads from the bulk are clipped
 
@@ -433,11 +434,19 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
             clipped += _mark_clipped(ax_curve, seed_counts, seed_returns, limits, color)
             clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
         median = np.median(returns, axis=0)
-        ax_curve.plot(np.median(counts, axis=0), median, color=color, lw=2.2, marker="o", ms=3.5)
+        style = LINE_STYLES[len(handles) % len(LINE_STYLES)]  # identical curves stay visible
+        ax_curve.plot(np.median(counts, axis=0), median, color=color, lw=2.2, ls=style, marker="o", ms=3.5)
         seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
         handles.append(
             Line2D(
-                [], [], color=color, lw=2.2, marker="o", ms=3.5, label=f"{method_label(r.method)}: median of {seeds}"
+                [],
+                [],
+                color=color,
+                lw=2.2,
+                ls=style,
+                marker="o",
+                ms=3.5,
+                label=f"{method_label(r.method)}: median of {seeds}",
             )
         )
     handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.8, label="thin lines: one seed each"))
