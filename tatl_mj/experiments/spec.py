@@ -400,9 +400,9 @@ def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
     the process that builds it, so each worker imports it too. Anything else is a
     built-in or a variant of one (``tatl_mj.transfer.registry.build``).
     """
-    import importlib
     import inspect
 
+    from tatl_mj import plugins
     from tatl_mj.transfer import registry
     from tatl_mj.transfer.method import TransferMethod
 
@@ -412,17 +412,7 @@ def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
         return registry.build(name, settings)
     if name in registry.METHODS:
         raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
-    module_name, _, attribute = path.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except Exception as error:  # noqa: BLE001 - the user's module may raise anything on import
-        raise ValueError(
-            f"method {path!r}: cannot import module {module_name!r} ({type(error).__name__}: {error}); "
-            "it must be importable here and in every worker (PYTHONPATH or installed)"
-        ) from None
-    if not hasattr(module, attribute):
-        raise ValueError(f"method {path!r}: module {module_name!r} has no attribute {attribute!r}")
-    obj = getattr(module, attribute)
+    obj = plugins.load(path, "method")
     kwargs = {k: _tuples(v) for k, v in settings.items() if k != registry.VARIANT_KEY}
     if isinstance(obj, type):
         try:
@@ -437,7 +427,7 @@ def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
         try:
             obj = obj(**kwargs)
         except TypeError as error:
-            raise ValueError(f"method {path!r}: {attribute}(**settings) failed: {error}") from None
+            raise ValueError(f"method {path!r}: {path.partition(':')[2]}(**settings) failed: {error}") from None
     elif kwargs:
         raise ValueError(f"method {path!r} is an instance, not a class: it takes no settings, got {sorted(kwargs)}")
     if not isinstance(obj, TransferMethod):

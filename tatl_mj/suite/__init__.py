@@ -28,6 +28,7 @@ from typing import Any
 import dm_env
 import numpy as np
 
+from tatl_mj import plugins
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import bicycle, cartpole, gridworld, mountain_car, pendulum
 
@@ -72,19 +73,9 @@ def check_domain(obj: Any, name: str) -> None:
 
 @functools.lru_cache(maxsize=None)  # per process; a failed import is not cached (it raised)
 def _imported(path: str) -> Any:
-    module_name, _, attribute = path.partition(":")
-    if not module_name or not attribute:
+    if ":" not in path:
         raise DomainError(f"domain {path!r}: an import path must be 'module:attribute'; {_valid_domains()}")
-    try:
-        module = importlib.import_module(module_name)
-    except Exception as error:  # noqa: BLE001 - the user's module may raise anything on import
-        raise DomainError(
-            f"domain {path!r}: cannot import module {module_name!r} ({type(error).__name__}: {error}); "
-            "it must be importable here and in every worker (PYTHONPATH or installed)"
-        ) from None
-    if not hasattr(module, attribute):
-        raise DomainError(f"domain {path!r}: module {module_name!r} has no attribute {attribute!r}")
-    obj = getattr(module, attribute)
+    obj = plugins.load(path, "domain", DomainError)
     check_domain(obj, path)
     return obj
 
