@@ -19,7 +19,6 @@ and checked against that contract (:func:`domain`).
 from __future__ import annotations
 
 import functools
-import importlib
 import inspect
 from collections.abc import Mapping
 from types import ModuleType
