@@ -75,18 +75,18 @@ def collect(side: Side, n: int, seed: int) -> Transitions:
     rng = np.random.default_rng(seed)
     low, high = np.asarray(side.data.state_low), np.asarray(side.data.state_high)
     states = rng.uniform(low, high, size=(n, len(low)))
-    actions = rng.integers(describe(side).n_actions, size=n)
+    return one_step(side, states, rng.integers(describe(side).n_actions, size=n))
+
+
+def one_step(side: Side, states: np.ndarray, actions: np.ndarray, reward: Callable | None = None) -> Transitions:
+    """One-step transitions of one side's real simulator from ``states`` under action indices
+    ``actions``, scored by its own reward and end condition (``reward``: ``_target_reward(side)``)."""
+    reward = _target_reward(side) if reward is None else reward
+    if reward is None:
+        raise ValueError(f"{side.domain}/{side.task} has no reward to score one-step transitions with")
     next_states = sampling.step_from(side.domain, side.task, states, actions, task_kwargs=side.task_kwargs)
-    task = suite.load(side.domain, side.task, task_kwargs=side.task_kwargs).task
-    absorbing = np.asarray(task.batch_absorbing(next_states), dtype=bool)
-    return Transitions(
-        states=states,
-        actions=actions,
-        rewards=task.batch_reward(next_states),
-        next_states=next_states,
-        absorbing=absorbing,
-        last=np.ones(n, dtype=bool),
-    )
+    rewards, absorbing = reward(states, actions, next_states)
+    return Transitions(states, actions, rewards, next_states, absorbing, np.ones(len(states), dtype=bool))
 
 
 def describe(side: Side) -> TaskDescription:
@@ -360,7 +360,7 @@ def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
     return derive_seed(seed, spec.name, "algorithm2-starts")
 
 
-def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable | None:
+def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None) -> Callable | None:
     """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
 
     The target task's own reward and end conditions (``_target_reward``) are
@@ -372,7 +372,6 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int) -> Callable |
     """
     target = spec.target
     description = describe(target)
-    reward = _target_reward(target)
     if reward is None:
         return None
     cells = CellMap(description.known_model()[3]) if description.known_model is not None else None
@@ -441,11 +440,11 @@ class Ledger:
         return entry[1]
 
 
-def _reset_samples(spec: ExperimentSpec, seed: int, largest: int) -> Callable[[int], Transitions]:
+def _reset_samples(
+    spec: ExperimentSpec, seed: int, largest: int, reward: Callable | None
+) -> Callable[[int], Transitions]:
     """The reset protocol's data: heads of one stream of one-step transitions from the reset box."""
-    target = spec.target
-    description = describe(target)
-    reward = _target_reward(target)
+    description = describe(spec.target)
     cache: list[Transitions] = []
 
     def samples(n: int) -> Transitions:
@@ -453,13 +452,7 @@ def _reset_samples(spec: ExperimentSpec, seed: int, largest: int) -> Callable[[i
             rng = np.random.default_rng(derive_seed(seed, spec.name, "reset-data"))
             size = max(n, largest)
             states = description.reset_states(size, rng)
-            actions = rng.integers(description.n_actions, size=size)
-            next_states = sampling.step_from(
-                target.domain, target.task, states, actions, task_kwargs=target.task_kwargs
-            )
-            assert reward is not None, "a reset box without a reward"
-            rewards, absorbing = reward(states, actions, next_states)
-            cache[:] = [Transitions(states, actions, rewards, next_states, absorbing, np.ones(size, dtype=bool))]
+            cache[:] = [one_step(spec.target, states, rng.integers(description.n_actions, size=size), reward)]
         return cache[0].head(n)
 
     return samples
@@ -505,8 +498,9 @@ def transfer_problem(
     def target_return(policy: Callable) -> float:
         return ledger.rollout(policy, lambda p: evaluate(spec, preset, p, rollout_seed))
 
+    reward = _target_reward(spec.target)  # loads the task once: every hook below shares it
     policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))
-    reset_samples = _reset_samples(spec, seed, max(preset.target_budgets))
+    reset_samples = _reset_samples(spec, seed, max(preset.target_budgets), reward)
     episode_samples = _episode_samples(spec, seed)
     return method.TransferProblem(
         source_q=artifacts.source_q,
@@ -516,10 +510,10 @@ def transfer_problem(
         target=target,
         seed=derive_seed(seed, spec.name, "target-learning"),
         target_return=target_return,
-        model_return=_model_return(spec, preset, seed),
+        model_return=_model_return(spec, preset, seed, reward),
         target_step=partial(_target_step, spec.target, target),
         policy_samples=lambda policy, n: ledger.data(policy_samples(policy, n)),
-        target_reward=_target_reward(spec.target),
+        target_reward=reward,
         reset_samples=lambda n: ledger.data(reset_samples(n)),
         episode_samples=lambda policy, n, round_: ledger.data(episode_samples(policy, n, round_)),
     )

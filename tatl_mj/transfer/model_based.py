@@ -18,10 +18,9 @@ import dataclasses
 import numpy as np
 
 from tatl_mj.description import CellMap, TaskDescription
-from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice
-from tatl_mj.transfer.features import make_features
+from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.method import TargetFQI, TransferProblem, _check_number, check_features
+from tatl_mj.transfer.method import TATL, TargetFQI, TransferProblem, _check_number, check_features
 from tatl_mj.transitions import Transitions
 
 
@@ -56,15 +55,9 @@ class ApprenticeFQI(TargetFQI):
             raise ValueError(f"{owner} needs the target's reset box; {target.domain}/{target.task} declares none")
 
     def fit_apprentice(self, problem: TransferProblem, data: Transitions) -> Apprentice:
-        target = problem.target
-        return fit_apprentice(
-            data.states,
-            target.action_values[data.actions],
-            data.next_states,
-            make_features(self.apprentice, target.state_dim),
-            self.apprentice_ridge,
-            periodic=target.periodic if any(target.periodic) else None,
-        )
+        """``ta-tl``'s apprentice fitted on every sample of ``data`` (no Algorithm 2: it needs the source)."""
+        tatl = TATL(apprentice=self.apprentice, ridge=self.apprentice_ridge, zeta=None)
+        return tatl.fit_apprentice(problem, data)[0]
 
     def model_transitions(
         self, problem: TransferProblem, apprentice: Apprentice, rng: np.random.Generator
