@@ -453,9 +453,7 @@ def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str]
     if comparison.random_return is not None:
         ax_curve.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
         handles.append(
-            Line2D(
-                [], [], color="0.45", ls=":", lw=1.2, label=f"reference: random policy ({comparison.random_return:.4g})"
-            )
+            Line2D([], [], color="0.45", ls=":", lw=1.2, label=f"random policy ({comparison.random_return:.4g})")
         )
     if comparison.meaningful:
         ax_curve.axhline(comparison.threshold, color="black", ls="--", lw=0.9)
