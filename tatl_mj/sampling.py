@@ -221,7 +221,7 @@ class _Simulator:
         this step, right after a reset.
         """
         self.bound(batch, "ctrl")[ids] = controls
-        before = _warning_totals(batch)
+        before = _warning_totals(batch, ids)
         diverged = np.zeros(len(ids), bool)
         if self.legacy_first and first.any():
             for k in np.flatnonzero(first):
@@ -234,7 +234,7 @@ class _Simulator:
         else:
             batch.step(ids, nstep=self.n_sub)
         # Any new MuJoCo warning is a PhysicsError in dm_control.
-        diverged |= (_warning_totals(batch) != before)[ids]
+        diverged |= _warning_totals(batch, ids) != before
         states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
@@ -249,11 +249,11 @@ class _Simulator:
         Bit-identical to K calls of ``advance``.
         """
         k, n = controls.shape[:2]
-        before, rows = _warning_totals(batch), batch.state[ids].copy()
+        before, rows = _warning_totals(batch, ids), batch.state[ids].copy()
         # The control of a control step is held over its n_sub substeps, as dm_control does.
         per_substep = np.repeat(controls.transpose(1, 0, 2), self.n_sub, axis=1)
         record = batch.rollout(k * self.n_sub, control=per_substep, record=("qpos", "qvel"), ids=ids)
-        if (_warning_totals(batch) != before)[ids].any():
+        if (_warning_totals(batch, ids) != before).any():
             batch.state[ids] = rows
             return None
         ends = slice(self.n_sub - 1, None, self.n_sub)  # the last substep of each control step
@@ -282,10 +282,11 @@ class _Simulator:
         return bool(physics.data.ptr.warning.number.any())
 
 
-def _warning_totals(batch: mujoco.batch.Batch) -> np.ndarray:
-    """Each simulation's count of MuJoCo warnings so far: counts only grow, so a new one
-    (a PhysicsError in dm_control) changes the total."""
-    return batch.warning[:, :, _WARNING_NUMBER].sum(axis=1)
+def _warning_totals(batch: mujoco.batch.Batch, ids: np.ndarray) -> np.ndarray:
+    """Simulations ``ids``' counts of MuJoCo warnings so far: counts only grow, so a new
+    one (a PhysicsError in dm_control) changes the total. Only ``ids`` are read: a
+    query batch grown once to thousands of simulations is stepped ten at a time."""
+    return batch.warning[ids, :, _WARNING_NUMBER].sum(axis=1)
 
 
 @functools.lru_cache(maxsize=16)
