@@ -177,3 +177,45 @@ def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, monkeypa
     else:
         assert length.get_ylabel() == "final return (undiscounted episode sum)"
         assert length.get_title().startswith("(b) final return")
+
+
+def interval_experiment() -> dict:
+    """An experiment with normalised statistics: ta-tl credited against its ablation."""
+    exp = experiment({"ta-tl": [100, 100, 1000], "apprentice-fqi": [None, None, None]})
+    for name, level in (("ta-tl", 0.95), ("apprentice-fqi", 0.2)):
+        data = exp["methods"][name]
+        data["curve"]["target_transitions"] = [BUDGETS] * 3
+        data["iqm"] = [
+            {"value": level * j / 2, "low": level * j / 2 - 0.1, "high": level * j / 2 + 0.1} for j in range(3)
+        ]
+    interval = {"value": 0.9, "low": 0.7, "high": 1.0}
+    exp["ablations"] = [
+        {"method": "ta-tl", "ablation": "apprentice-fqi", "probability_of_improvement": interval, "verdict": "credited"}
+    ]
+    exp["reference_return"] = 10.0
+    return exp
+
+
+def test_interval_figure_draws_iqm_bands_and_the_probability_of_improvement(tmp_path, monkeypatch):
+    import matplotlib.collections
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
+    )
+    plot.figure("toy", interval_experiment(), tmp_path / "toy.png")
+    (fig,) = drawn
+    curve, improvement = fig.axes
+    assert curve.get_ylabel() == plot.NORMALISED_LABEL
+    # One band per method, spanning its interval at the largest budget.
+    bands = [c for c in curve.collections if isinstance(c, matplotlib.collections.PolyCollection)]
+    assert len(bands) == 2
+    top = max(bands, key=lambda b: b.get_paths()[0].vertices[:, 1].max())
+    assert top.get_paths()[0].vertices[:, 1].max() == pytest.approx(0.95 + 0.1)
+    # The pair's interval and point, the 0.5 line and its verdict.
+    (segment,) = [c for c in improvement.collections if isinstance(c, matplotlib.collections.LineCollection)]
+    assert segment.get_segments()[0][:, 0].tolist() == [0.7, 1.0]
+    assert [t.get_text() for t in improvement.texts] == ["credited"]
+    assert improvement.get_yticklabels()[0].get_text() == "ta-tl > apprentice-fqi\n(its ablation)"

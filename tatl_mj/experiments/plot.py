@@ -1,18 +1,20 @@
 """`tatl plot DIR`: two panels per experiment and a comparison table (DIR/results.md).
 
-Everything is drawn from :func:`tatl_mj.experiments.summary.compare`, so the
-figure and the table show the same seeds and the same numbers:
+Everything is drawn from the run's summary (:mod:`tatl_mj.experiments.summary`),
+so the figure and the table show the same seeds and the same numbers. Where the
+experiment declares a reference return (every shipped preset does):
 
-- Panel (a): target return (the undiscounted sum of an episode's rewards, the
-  mean over the evaluation episodes) against target samples; a thin line per
-  seed and a thick median line per method; the random policy's return (a
-  reference, dotted) and the threshold (dashed). Values far outside the bulk of
-  the data are clipped to the axis and marked with triangles, so one diverged
-  seed cannot flatten every other curve.
-- Panel (b): target samples each seed needed to reach the threshold (a dot per
-  seed, a bar for the median); seeds that never reached it sit on the "never"
-  row. Without a meaningful threshold, panel (b) shows final returns instead.
-- A caption under the panels defines the threshold and the lines.
+- Panel (a): the IQM over seeds of the normalised score (0: the random policy,
+  1: the reference return) against the target transitions counted, with its 95%
+  stratified-bootstrap band, and the threshold (dashed).
+- Panel (b): the probability that a method beats its source-free ablation (and
+  the best baseline) on a seed, on the area under its normalised curve, with its
+  95% interval; the verdict beside it.
+
+Without a reference return: (a) per-seed returns (an undiscounted episode sum)
+with a thick median and the random policy's return; (b) the target samples each
+seed needed to reach the relative threshold ("never" row), or final returns.
+A caption under the panels defines what is drawn.
 
 Any number of methods is drawn, each with a colour that depends only on its
 name (known methods have fixed ones).
@@ -31,6 +33,7 @@ import numpy as np
 
 from tatl_mj.experiments.records import read_json
 from tatl_mj.experiments.summary import (
+    REFERENCE_THRESHOLD,
     THRESHOLD_FRACTION,
     Comparison,
     MethodResult,
@@ -393,7 +396,144 @@ def _mark_clipped(ax: Any, x: np.ndarray, y: np.ndarray, limits: tuple[float, fl
 
 
 def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str] | None = None) -> Path:
-    """Draws one experiment's two panels and caption to ``path``; returns it."""
+    """Draws one experiment's two panels and caption to ``path``; returns it.
+
+    With normalised scores (a reference return is declared): (a) the IQM of the
+    normalised score with its 95% band, (b) the probability of improvement over the
+    source-free ablation and over the best baseline. Without: per-seed returns and
+    samples to the relative threshold.
+    """
+    if methods is None and any("iqm" in data for data in experiment["methods"].values()):
+        return interval_figure(name, experiment, path)
+    return _return_figure(name, experiment, path, methods)
+
+
+NORMALISED_LABEL = "normalised score (0: random policy, 1: reference return)"
+
+
+def _iqm_panel(ax: Any, experiment: dict, order: list[str], colors: dict[str, str]) -> list[Any]:
+    """IQM of each method's normalised score against its median counted transitions, with the
+    95% band; returns the legend handles."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles: list[Any] = []
+    drawn: list[float] = []
+    lines = []
+    for i, method in enumerate(order):
+        data = experiment["methods"][method]
+        budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
+        counted = np.asarray(data["curve"].get("target_transitions", [budgets]), dtype=np.float64)
+        x = np.median(np.where(counted > 0, counted, budgets), axis=0)
+        value, low, high = (
+            np.array([np.nan if e[k] is None else e[k] for e in data["iqm"]]) for k in ("value", "low", "high")
+        )
+        lines.append((method, x, value, np.where(np.isnan(low), value, low), np.where(np.isnan(high), value, high)))
+        drawn += [*value, *low[np.isfinite(low)], *high[np.isfinite(high)]]
+        style = LINE_STYLES[i % len(LINE_STYLES)]  # identical curves stay visible
+        handles.append(
+            Line2D([], [], color=colors[method], lw=2, ls=style, marker="o", ms=3.5, label=method_label(method))
+        )
+    limits = axis_limits(drawn, [0.0, 1.0])
+    clipped = 0
+    for i, (method, x, value, low, high) in enumerate(lines):
+        color = colors[method]
+        ax.fill_between(x, np.clip(low, *limits), np.clip(high, *limits), color=color, alpha=0.15, lw=0)
+        ax.plot(x, np.clip(value, *limits), color=color, lw=2, ls=LINE_STYLES[i % len(LINE_STYLES)], marker="o", ms=3.5)
+        clipped += _mark_clipped(ax, x, value, limits, color)
+    ax.axhline(0.0, color="0.45", ls=":", lw=1.2)
+    ax.axhline(1.0, color="0.45", ls="-.", lw=1.0)
+    ax.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
+    handles += [
+        Patch(color="0.5", alpha=0.3, label="band: 95% CI (stratified bootstrap over seeds)"),
+        Line2D([], [], color="0.45", ls=":", lw=1.2, label="random policy (0)"),
+        Line2D([], [], color="0.45", ls="-.", lw=1.0, label="reference return (1)"),
+        Line2D([], [], color="black", ls="--", lw=0.9, label=f"threshold ({REFERENCE_THRESHOLD})"),
+    ]
+    if clipped:
+        label = f"IQM beyond the axis ({clipped} point{'s' * (clipped > 1)})"
+        handles.append(Line2D([], [], color="white", marker="v", markeredgecolor="black", markerfacecolor="0.6",
+                              ms=6, lw=0, label=label))  # fmt: skip
+    ax.set_ylim(*limits)
+    ax.set_xscale("log")
+    ticks = spaced_ticks(sorted({float(v) for _, x, *_ in lines for v in x}), 0.2)
+    ax.set_xticks(ticks, [compact(b) for b in ticks])
+    ax.minorticks_off()
+    ax.set_xlabel("target transitions counted (median over seeds)")
+    ax.set_ylabel(NORMALISED_LABEL)
+    ax.set_title("(a) IQM of the normalised score over seeds, 95% band", fontsize=10)
+    ax.grid(alpha=0.25)
+    return handles
+
+
+def _improvement_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> None:
+    """P(method > other) on the area under the curve, with its interval, for each method against
+    its source-free ablation and against the best baseline."""
+    pairs = [(p, "its ablation") for p in experiment.get("ablations", [])]
+    pairs += [(p, "best baseline") for p in experiment.get("vs_best_baseline", [])]
+    words = {"credited": "better", "worse": "worse", "not credited": "no clear difference"}
+    for row, (pair, kind) in enumerate(pairs):
+        estimate = pair["probability_of_improvement"]
+        value = estimate["value"]
+        low = value if estimate["low"] is None else estimate["low"]
+        high = value if estimate["high"] is None else estimate["high"]
+        color = colors.get(pair["method"], "black")
+        ax.hlines(row, low, high, color=color, lw=5, alpha=0.5)
+        ax.plot([value], [row], "o", color=color, markeredgecolor="black", ms=6)
+        verdict = pair["verdict"] if kind == "its ablation" else words[pair["verdict"]]
+        ax.text(1.02, row, verdict, va="center", fontsize=7.5, transform=ax.get_yaxis_transform())
+    labels = [f"{p['method']} > {p['ablation']}\n({kind})" for p, kind in pairs]
+    ax.set_yticks(range(len(pairs)), labels, fontsize=7.5)
+    ax.set_ylim(len(pairs) - 0.5, -0.5)
+    ax.axvline(0.5, color="black", ls="--", lw=0.9)
+    ax.set_xlim(0.0, 1.0)
+    ax.set_xlabel("P(method beats the other on a seed), area under the normalised curve")
+    ax.set_title("(b) probability of improvement, 95% CI", fontsize=10)
+    if not pairs:
+        ax.text(0.5, 0.5, "no ablation or baseline pair in this spec", ha="center", va="center", fontsize=8)
+    ax.grid(axis="x", alpha=0.25)
+
+
+def interval_figure(name: str, experiment: dict, path: str | Path) -> Path:
+    """The interval figure (see :func:`figure`): IQM bands and probabilities of improvement."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    order = sorted((m for m, d in experiment["methods"].items() if "iqm" in d), key=_order)
+    colors = method_colors(order)
+    pairs = len(experiment.get("ablations", [])) + len(experiment.get("vs_best_baseline", []))
+    fig, (ax_curve, ax_pi) = plt.subplots(1, 2, figsize=(12, 4.6), gridspec_kw={"width_ratios": [1.35, 1]})
+    handles = _iqm_panel(ax_curve, experiment, order, colors)
+    _improvement_panel(ax_pi, experiment, colors)
+    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
+    ncol = 4
+    legend_rows = math.ceil(len(handles) / ncol)
+    reference = experiment.get("reference_return")
+    seeds = list(compare(experiment).seeds)
+    caption = (
+        f"Compared over seeds {seeds}. Normalised score: (R - R_random) / (R_reference - R_random), R an "
+        "undiscounted episode return (mean over the evaluation episodes), R_random the random policy's on the "
+        f"same seed, R_reference = {reference:.4g} fixed in the spec. (a) IQM: mean of the middle half of the "
+        "seeds. (b) Verdict against the ablation: credited when the interval lies above 0.5, worse when below."
+    )
+    caption = "\n".join(textwrap.wrap(caption, width=180))
+    height = 4.6 + 0.22 * legend_rows + 0.5 + 0.05 * max(0, pairs - 6)
+    fig.set_size_inches(12, height)
+    block = 0.6 + 0.22 * legend_rows + 0.4
+    fig.subplots_adjust(left=0.06, right=0.93, top=1 - 0.5 / height, bottom=block / height, wspace=0.55)
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=7.5, frameon=False,
+               bbox_to_anchor=(0.5, 0.42 / height))  # fmt: skip
+    fig.text(0.06, 0.08 / height, caption, fontsize=7.5, va="bottom", ha="left")
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _return_figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str] | None = None) -> Path:
+    """Per-seed returns and samples to threshold (no normalised scores)."""
     import matplotlib
 
     matplotlib.use("Agg")
