@@ -34,6 +34,7 @@ from tatl_mj import sampling, suite
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
 from tatl_mj.transfer import alignment, coordinates, fqi, method
+from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
 
 
@@ -486,10 +487,13 @@ def transfer_problem(
     artifacts: SourceArtifacts,
     seed: int,
     ledger: Ledger | None = None,
+    placebo: bool = False,
 ) -> "method.TransferProblem":
     """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its hooks.
 
     Every hook that touches the real target charges ``ledger`` (a fresh one if None).
+    ``placebo`` puts an untrained source Q of the trained one's shape in
+    place of the trained one (``tatl_mj.transfer.placebo``), drawn from this seed.
     """
     ledger = Ledger() if ledger is None else ledger
     source, target = describe(spec.source), describe(spec.target)
@@ -502,8 +506,11 @@ def transfer_problem(
     policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))
     reset_samples = _reset_samples(spec, seed, max(preset.target_budgets), reward)
     episode_samples = _episode_samples(spec, seed)
+    source_q = artifacts.source_q
+    if placebo:
+        source_q = placebo_q(source_q, derive_seed(seed, spec.name, "placebo"))
     return method.TransferProblem(
-        source_q=artifacts.source_q,
+        source_q=source_q,
         mapping=QueriedMapping(artifacts.mapping, partial(_source_region, spec.source, source)),
         source_step=partial(_source_step, spec.source, source),
         source=source,
@@ -517,6 +524,10 @@ def transfer_problem(
         reset_samples=lambda n: ledger.data(reset_samples(n)),
         episode_samples=lambda policy, n, round_: ledger.data(episode_samples(policy, n, round_)),
     )
+
+
+def _placebo(transfer: Any) -> bool:
+    return getattr(transfer, "source", "trained") == "placebo"
 
 
 def learned_policy(
@@ -533,7 +544,8 @@ def learned_policy(
     The one path from a method to a policy: evaluation (``run_method``) and clips
     (``tatl render``) both call it, so a clip shows the evaluated policy.
     """
-    problem = transfer_problem(spec, preset, artifacts, seed) if problem is None else problem
+    if problem is None:
+        problem = transfer_problem(spec, preset, artifacts, seed, placebo=_placebo(transfer))
     return transfer.learn(problem, artifacts.target_stream.head(budget))
 
 
@@ -552,7 +564,7 @@ def run_method(
     if transfer is None:
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     ledger = Ledger()
-    problem = transfer_problem(spec, preset, artifacts, seed, ledger)
+    problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
     data = str(getattr(transfer, "data", "shared"))
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
     # A method that uses no target samples (an oracle, a reference) learns the same

@@ -226,6 +226,9 @@ def table(summary: dict) -> str:
                 "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
                 "compared seeds; only methods with an episode that ended early): " + "; ".join(parts) + ".",
             ]
+        if exp.get("placebo"):
+            lines += ["", "Transfer against the same method on a placebo (untrained) source:", ""]
+            lines += [f"- {_pair_sentence(p, against='its placebo')}" for p in exp["placebo"]]
         best = exp.get("best_baseline")
         if exp.get("vs_best_baseline"):
             lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
@@ -326,6 +329,8 @@ def _pair_sentence(pair: dict, against: str = "its source-free ablation") -> str
         meaning = "too few seeds for an interval"
     if against == "its source-free ablation":
         outcome = f"{VERDICT_WORDS[pair['verdict']]} to transfer"
+    elif against == "its placebo":
+        outcome = f"{VERDICT_WORDS[pair['verdict']]} to the source's content"
     else:
         outcome = {"credited": "**better**", "worse": "**worse**", "not credited": "**no clear difference**"}[
             pair["verdict"]
@@ -470,6 +475,7 @@ def _improvement_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> Non
     """P(method > other) on the area under the curve, with its interval, for each method against
     its source-free ablation and against the best baseline."""
     pairs = [(p, "its ablation") for p in experiment.get("ablations", [])]
+    pairs += [(p, "placebo source") for p in experiment.get("placebo", [])]
     pairs += [(p, "best baseline") for p in experiment.get("vs_best_baseline", [])]
     words = {"credited": "better", "worse": "worse", "not credited": "no clear difference"}
     for row, (pair, kind) in enumerate(pairs):
@@ -480,7 +486,7 @@ def _improvement_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> Non
         color = colors.get(pair["method"], "black")
         ax.hlines(row, low, high, color=color, lw=5, alpha=0.5)
         ax.plot([value], [row], "o", color=color, markeredgecolor="black", ms=6)
-        verdict = pair["verdict"] if kind == "its ablation" else words[pair["verdict"]]
+        verdict = words[pair["verdict"]] if kind == "best baseline" else pair["verdict"]
         ax.text(1.02, row, verdict, va="center", fontsize=7.5, transform=ax.get_yaxis_transform())
     labels = [f"{p['method']} > {p['ablation']}\n({kind})" for p, kind in pairs]
     ax.set_yticks(range(len(pairs)), labels, fontsize=7.5)
@@ -503,7 +509,7 @@ def interval_figure(name: str, experiment: dict, path: str | Path) -> Path:
 
     order = sorted((m for m, d in experiment["methods"].items() if "iqm" in d), key=_order)
     colors = method_colors(order)
-    pairs = len(experiment.get("ablations", [])) + len(experiment.get("vs_best_baseline", []))
+    pairs = sum(len(experiment.get(k, [])) for k in ("ablations", "placebo", "vs_best_baseline"))
     fig, (ax_curve, ax_pi) = plt.subplots(1, 2, figsize=(12, 4.6), gridspec_kw={"width_ratios": [1.35, 1]})
     handles = _iqm_panel(ax_curve, experiment, order, colors)
     _improvement_panel(ax_pi, experiment, colors)

@@ -227,6 +227,26 @@ def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
     return pairs
 
 
+def placebo_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
+    """(transfer method, the same method on a placebo source) for every such pair a spec lists:
+    a table with ``source = "placebo"`` pairs with the table of the same built-in whose
+    settings are otherwise the same."""
+    from tatl_mj.transfer import registry
+
+    def key(name: str) -> tuple[str, list] | None:
+        settings = dict(spec_methods.get(name) or {})
+        try:
+            base = registry.base_of(name, settings)
+        except ValueError:
+            return None
+        rest = sorted((k, repr(v)) for k, v in settings.items() if k not in (registry.VARIANT_KEY, "source"))
+        return base, rest
+
+    placebos = [n for n, s in spec_methods.items() if (s or {}).get("source") == "placebo"]
+    trained = [n for n, s in spec_methods.items() if (s or {}).get("source", "trained") == "trained"]
+    return [(t, p) for p in placebos for t in trained if key(t) is not None and key(t) == key(p)]
+
+
 def _side(mine: np.ndarray, theirs: np.ndarray, mine_centre: float, theirs_centre: float) -> tuple[int, int, int]:
     """(+1 better / -1 worse / 0 neither, seeds better, seeds worse) where larger is better."""
     better, worse = int(np.sum(mine > theirs)), int(np.sum(mine < theirs))
@@ -464,6 +484,11 @@ def _statistics(experiment: dict, spec: dict) -> None:
         _pair(method, ablation, areas, finals)
         for method, ablation in ablation_pairs(spec.get("methods") or {})
         if method in areas and ablation in areas
+    ]
+    experiment["placebo"] = [
+        _pair(method, placebo, areas, finals)
+        for method, placebo in placebo_pairs(spec.get("methods") or {})
+        if method in areas and placebo in areas
     ]
     experiment["vs_best_baseline"] = [
         _pair(m, best, areas, finals) for m in areas if best is not None and m != best and m not in baselines

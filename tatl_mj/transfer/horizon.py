@@ -473,8 +473,9 @@ class HorizonTATL(TATL):
             raise ValueError(f"{owner}.model is {self.model!r}; valid choices: {list(self.MODELS)}")
         if not isinstance(self.source_zero, tuple) or not all(isinstance(n, str) for n in self.source_zero):
             raise ValueError(f"{owner}.source_zero must be source state names, got {self.source_zero!r}")
-        if self.source_zero and self.reference != "source":
-            raise ValueError(f"{owner}.source_zero needs reference = 'source' (the zero reference has no source)")
+        for field, used in (("source_zero", bool(self.source_zero)), ("source = 'placebo'", self.source == "placebo")):
+            if used and self.reference != "source":
+                raise ValueError(f"{owner}.{field} needs reference = 'source' (the zero reference has no source)")
 
     @property
     def uses_samples(self) -> bool:

@@ -30,6 +30,7 @@ from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_appren
 from tatl_mj.transfer.baselines import MappedQ
 from tatl_mj.transfer.features import Features, make_features
 from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, make_regressor
+from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, SourceStep, TATLPolicy
 from tatl_mj.transitions import Transitions
 
@@ -239,6 +240,8 @@ class TATL:
         actuator limits (a labelled variant).
       adaptive_actions: an explicit admissible set A_ad (values of a one-dimensional
         actuator) to snap to instead.
+      source: ``"trained"``, the source Q of Phase I, or ``"placebo"``, an untrained
+        one of its shape (``tatl_mj.transfer.placebo``): the placebo-source ablation.
     """
 
     apprentice: dict = dataclasses.field(default_factory=lambda: {"kind": "linear"})
@@ -248,6 +251,7 @@ class TATL:
     batch: int | None = None
     actions: str = "discrete"
     adaptive_actions: tuple[float, ...] = ()
+    source: str = "trained"
     name: str = "ta-tl"
 
     GAPS = ("absolute", "relative")
@@ -258,6 +262,7 @@ class TATL:
         check_features(owner, "apprentice", self.apprentice)
         _check_choice(owner, "gap", self.gap, self.GAPS)
         _check_choice(owner, "actions", self.actions, self.ACTION_SETS)
+        _check_choice(owner, "source", self.source, SOURCES)
         _check_number(owner, "ridge", self.ridge, 0.0)
         if self.zeta is not None:
             _check_number(owner, "zeta", self.zeta, 0.0, low_open=True)
@@ -364,6 +369,8 @@ class TargetFQI:
         ``online_batch``), no resets to chosen states.
       epsilon: the online protocol's exploration rate.
       online_batch: the online protocol's first, random-policy collection.
+      source: ``"trained"`` or ``"placebo"`` (see :class:`TATL`); only for learners
+        that use the mapped source Q (UMA-TL and its kin).
     """
 
     features: dict | None = None
@@ -375,6 +382,7 @@ class TargetFQI:
     data: str = "shared"
     epsilon: float = 0.1
     online_batch: int = 100
+    source: str = "trained"
     name: str = "target-fqi"
     source_use = "none"  # how the mapped source Q enters: "none", "initial" (Q_0) or "prior" (every fit)
 
@@ -397,6 +405,9 @@ class TargetFQI:
         _check_choice(owner, "data", self.data, DATA_PROTOCOLS)
         _check_number(owner, "epsilon", self.epsilon, 0.0, 1.0)
         _check_number(owner, "online_batch", self.online_batch, 1, integer=True)
+        _check_choice(owner, "source", self.source, SOURCES)
+        if self.source == "placebo" and self.source_use == "none":
+            raise ValueError(f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none")
 
     @property
     def linear_features(self) -> dict:
