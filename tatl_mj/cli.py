@@ -98,7 +98,10 @@ def _run(args: argparse.Namespace) -> int:
     if problem:
         print(f"tatl run: {problem}", file=sys.stderr)
         return 2
-    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    seeds = _seeds(args, specs)
+    if isinstance(seeds, str):
+        print(f"tatl run: {seeds}", file=sys.stderr)
+        return 2
     try:
         methods = _methods(args.methods)
     except ValueError as error:
@@ -157,6 +160,23 @@ def _run(args: argparse.Namespace) -> int:
         print(f"tatl run: {failed}", file=sys.stderr)
         return 1
     return 0
+
+
+def _seeds(args: argparse.Namespace, specs: list) -> range | str:
+    """--seeds and --first-seed, or where not given the preset's own (every spec's must agree);
+    a string says why not."""
+    chosen = {}
+    for option, field in (("seeds", "seeds"), ("first_seed", "first_seed")):
+        given = getattr(args, option)
+        if given is not None:
+            chosen[field] = given
+            continue
+        values = {getattr(s.preset(args.preset), field) for s in specs}
+        if len(values) > 1:
+            flag = "--" + option.replace("_", "-")
+            return f"the specs' presets.{args.preset}.{field} differ ({sorted(values)}): give {flag}"
+        chosen[field] = values.pop()
+    return range(chosen["first_seed"], chosen["first_seed"] + chosen["seeds"])
 
 
 def _methods(text: str | None) -> dict | None:
@@ -280,12 +300,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run transfer experiments (resumable)")
     p.add_argument("specs", nargs="+", help="experiment specs, e.g. tasks/*.toml")
     p.add_argument("--preset", default="smoke", help="named budget preset in the specs (default: smoke)")
-    p.add_argument("--seeds", type=_int_at_least(1), default=2, help="number of seeds, >= 1 (default: 2)")
+    p.add_argument(
+        "--seeds",
+        type=_int_at_least(1),
+        default=None,
+        help="number of seeds, >= 1 (default: the preset's `seeds`; smoke 2, paper 10)",
+    )
     p.add_argument(
         "--first-seed",
         type=_int_at_least(0),
-        default=0,
-        help="seeds run are FIRST_SEED .. FIRST_SEED + SEEDS - 1, >= 0 (default: 0)",
+        default=None,
+        help="seeds run are FIRST_SEED .. FIRST_SEED + SEEDS - 1, >= 0 (default: the preset's "
+        "`first_seed`; smoke 0, paper 100: held out, tuning used 0-4)",
     )
     p.add_argument("--out", type=_non_empty, required=True, help="output folder; rerunning resumes it")
     p.add_argument("--workers", type=_int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")

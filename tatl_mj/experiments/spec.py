@@ -122,6 +122,10 @@ class Preset:
     # controller or long-budget learner on the true system, never one of the
     # methods compared): normalised scores and the threshold are measured against it.
     reference_return: float | None = None
+    # The seeds ``tatl run`` uses when none are given: ``seeds`` of them from
+    # ``first_seed``. The paper preset's are held out (tuning used seeds 0-4).
+    seeds: int = 2
+    first_seed: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -350,9 +354,11 @@ def _check(spec: ExperimentSpec) -> None:
         raise SpecError(f"{p}: at least one [presets.NAME] table is required (e.g. smoke, paper)")
     for name, preset in spec.presets.items():
         key = f"presets.{name}"
-        for field in ("source_samples", "alignment_samples", "evaluation_episodes", "evaluation_steps"):
+        for field in ("source_samples", "alignment_samples", "evaluation_episodes", "evaluation_steps", "seeds"):
             if getattr(preset, field) <= 0:
                 _fail(p, f"{key}.{field}", "a positive integer", getattr(preset, field))
+        if preset.first_seed < 0:
+            _fail(p, f"{key}.first_seed", "an integer >= 0", preset.first_seed)
         budgets = preset.target_budgets
         if not budgets or any(b <= 0 for b in budgets) or list(budgets) != sorted(set(budgets)):
             _fail(p, f"{key}.target_budgets", "a non-empty strictly increasing array of positive integers", budgets)
