@@ -104,7 +104,11 @@ class _Simulator:
         self.action_dim = 1 if self.actions.ndim == 1 else self.actions.shape[1]
         physics = getattr(self.env, "physics", None)
         self.fast = physics is not None and bool(getattr(self.env.task, "rollout_compatible", False))
+        self.table: _Table | None = None
         if not self.fast:
+            known_model = suite.describe(domain, task, self.kwargs).known_model
+            if known_model is not None and np.array_equal(self.actions, np.arange(len(self.actions))):
+                self.table = _Table(known_model, self.time_limit())
             return
         self.physics = physics
         self.model = physics.model.ptr
@@ -168,6 +172,14 @@ class _Simulator:
             self._batch = self.new_batch(nsim)
         return self._batch
 
+    def time_limit(self) -> Any:
+        """The task's ``time_limit`` argument: as given, else its factory's default."""
+        time_limit = self.kwargs.get("time_limit")
+        if time_limit is None:
+            factory = suite.domain(self.domain).TASKS[self.task_name]
+            time_limit = inspect.signature(factory).parameters["time_limit"].default
+        return time_limit
+
     def step_limit(self, max_episode_steps: int | None) -> float:
         """Steps after which an episode ends by time limit, as dm_control counts them.
 
@@ -175,12 +187,8 @@ class _Simulator:
         """
         if max_episode_steps is not None:
             return float(max_episode_steps)
-        time_limit = self.kwargs.get("time_limit")
-        if time_limit is None:
-            factory = suite.domain(self.domain).TASKS[self.task_name]
-            time_limit = inspect.signature(factory).parameters["time_limit"].default
         # dm_control's own float expression, so that the count matches exactly.
-        return time_limit / (self.physics.timestep() * self.n_sub)
+        return self.time_limit() / (self.physics.timestep() * self.n_sub)
 
     def bound(self, batch: mujoco.batch.Batch, name: str) -> np.ndarray:
         """``batch.bind(name)``, made once per batch (the per-step hot path)."""
@@ -282,6 +290,37 @@ class _Simulator:
         return bool(physics.data.ptr.warning.number.any())
 
 
+class _Table:
+    """A task's known exact model, which its environment's steps follow.
+
+    The contract (the grid world's): from cell c, action index a leads to cell
+    ``next_state[c, a]`` with ``reward[c, a]``; the episode ends there with
+    discount 0 where ``absorbing[c, a]``, else by time limit after
+    ``time_limit`` steps. The environment loops step this table instead of the
+    environment, whose Python step costs more than the lookup (resets, and the
+    random draws they make, still go through the environment).
+    """
+
+    def __init__(self, known_model: Any, time_limit: int):
+        next_state, reward, absorbing, cells = known_model()
+        self.cell_map = CellMap(cells)
+        self.states = self.cell_map.cells.astype(np.float64)
+        self.next_state = np.asarray(next_state, np.int64)
+        self.reward = np.asarray(reward, np.float64)
+        self.absorbing = np.asarray(absorbing, bool)
+        self.time_limit = int(time_limit)
+        # As lists for the per-step loops: indexing numpy arrays with scalars costs more.
+        self.next_list, self.reward_list = self.next_state.tolist(), self.reward.tolist()
+        self.absorbing_list = self.absorbing.tolist()
+
+    def episode_limit(self, max_episode_steps: int | None) -> int:
+        """Steps after which an episode ends if nothing ends it sooner."""
+        return self.time_limit if max_episode_steps is None else min(self.time_limit, max_episode_steps)
+
+    def cell(self, timestep: dm_env.TimeStep) -> int:
+        return int(self.cell_map.index(_observed_state(timestep)[None])[0])
+
+
 def _warning_totals(batch: mujoco.batch.Batch, ids: np.ndarray) -> np.ndarray:
     """Simulations ``ids``' counts of MuJoCo warnings so far: counts only grow, so a new
     one (a PhysicsError in dm_control) changes the total. Only ``ids`` are read: a
@@ -321,10 +360,12 @@ def _check_count(name: str, value: Any, minimum: int) -> int:
 
 def _check_indices(indices: Any, n: int, n_actions: int) -> np.ndarray:
     a = np.asarray(indices)
-    if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer):
+    if a.shape != (n,) or a.dtype.kind not in "iu":  # signed or unsigned integers
         raise ValueError(f"policy must return ({n},) integer action indices, got {a.dtype} {a.shape}")
-    if n and (a.min() < 0 or a.max() >= n_actions):
-        raise ValueError(f"action indices must be in 0..{n_actions - 1}, got {a.min()}..{a.max()}")
+    # One state a call in the environment loops: a scalar comparison, not two reductions.
+    low, high = (a[0], a[0]) if n == 1 else (a.min(), a.max()) if n else (0, 0)
+    if low < 0 or high >= n_actions:
+        raise ValueError(f"action indices must be in 0..{n_actions - 1}, got {low}..{high}")
     return a.astype(np.int64, copy=False)
 
 
@@ -470,6 +511,8 @@ def collect(
     if max_episode_steps is not None:
         _check_count("max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
+    if sim.table is not None:
+        return _collect_table(sim, n, seed, policy, max_episode_steps)
     if not sim.fast:
         return _collect_env(sim, n, seed, policy, max_episode_steps)
     limit = sim.step_limit(max_episode_steps)
@@ -815,6 +858,54 @@ def _collect_env(
     return Transitions(**out)
 
 
+def _collect_table(
+    sim: _Simulator,
+    n: int,
+    seed: int,
+    policy: IndexPolicy | None,
+    max_episode_steps: int | None,
+) -> Transitions:
+    """:func:`_collect_env` on the task's known table (:class:`_Table`): the same resets,
+    random actions and policy calls, in the same order, so the same transitions."""
+    table = sim.table
+    assert table is not None
+    env = sim.make_env(seed)
+    n_actions = len(sim.actions)
+    # One action per transition, as _collect_env draws them one at a time: a Generator
+    # gives the same integers in one call.
+    drawn = np.random.default_rng(seed).integers(n_actions, size=n).tolist() if policy is None else None
+    limit = table.episode_limit(max_episode_steps)
+    next_list, reward_list, absorbing_list = table.next_list, table.reward_list, table.absorbing_list
+    cells, next_cells, actions, rewards = [0] * n, [0] * n, [0] * n, [0.0] * n
+    absorbing, last = np.zeros(n, bool), np.zeros(n, bool)
+    i = 0
+    while i < n:
+        c, steps = table.cell(env.reset()), 0
+        while i < n:
+            if drawn is not None:
+                a = drawn[i]
+            else:
+                a = int(_check_indices(policy(table.states[c : c + 1].copy()), 1, n_actions)[0])
+            nxt = next_list[c][a]
+            steps += 1
+            cells[i], actions[i], rewards[i], next_cells[i] = c, a, reward_list[c][a], nxt
+            absorbing[i] = absorbing_list[c][a]
+            last[i] = absorbing[i] or steps == limit
+            i += 1
+            if last[i - 1]:
+                break
+            c = nxt
+    last[-1] = True
+    return Transitions(
+        table.states[cells],
+        np.asarray(actions, np.int64),
+        np.asarray(rewards, np.float64),
+        table.states[next_cells],
+        absorbing,
+        last,
+    )
+
+
 # --- One-step queries and evaluation ------------------------------------------------
 
 
@@ -898,10 +989,8 @@ class _SeededOnUse:
 
 def _step_from_env(sim: _Simulator, s: np.ndarray, a: np.ndarray) -> np.ndarray:
     """One step per query through the environment, or the task's known exact model."""
-    known_model = suite.describe(sim.domain, sim.task_name, sim.kwargs).known_model
-    if known_model is not None:
-        next_index, _, _, cells = known_model()
-        return cells[next_index[CellMap(cells).index(s), a]].astype(np.float64)
+    if sim.table is not None:
+        return sim.table.states[sim.table.next_state[sim.table.cell_map.index(s), a]]
     env = sim.env
     target = getattr(env, "physics", env)  # whichever holds set_state_vector
     out = np.empty_like(s)
@@ -939,6 +1028,8 @@ def evaluate(
     if max_episode_steps is not None:
         _check_count("max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
+    if sim.table is not None:
+        return _evaluate_table(sim, policy, n_episodes, seed, max_episode_steps)
     if not sim.fast:
         return _evaluate_env(sim, policy, n_episodes, seed, max_episode_steps)
     limit = sim.step_limit(max_episode_steps)
@@ -1005,6 +1096,42 @@ def _evaluate_env(
             if not (timestep.last() or lengths[i] == max_episode_steps):
                 still.append(i)
         live = np.asarray(still, np.int64)
+    return returns, lengths
+
+
+def _evaluate_table(
+    sim: _Simulator,
+    policy: ValuePolicy,
+    n_episodes: int,
+    seed: int,
+    max_episode_steps: int | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_evaluate_env` on the task's known table (:class:`_Table`): the same starts
+    and policy calls, each live episode's step looked up."""
+    table = sim.table
+    assert table is not None
+    envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
+    cells = np.array([table.cell(e.reset()) for e in envs], np.int64)
+    states = table.states[cells]
+    returns = np.zeros(n_episodes)
+    lengths = np.zeros(n_episodes, np.int64)
+    limit = table.episode_limit(max_episode_steps)
+    live = np.arange(n_episodes)
+    while len(live):
+        values = _check_values(policy(states[live]), len(live), sim)[:, 0]
+        valid = np.isfinite(values) & (values >= 0) & (values < len(sim.actions))
+        valid[valid] = values[valid] == np.floor(values[valid])
+        if not valid.all():  # the environment's own error for an action it refuses
+            j = int(np.argmin(valid))
+            envs[live[j]].step(values[j : j + 1])
+            raise ValueError(f"{sim.domain} action must be an index in 0..{len(sim.actions) - 1}, got {values[j]}")
+        c, a = cells[live], values.astype(np.int64)
+        returns[live] += table.reward[c, a]
+        lengths[live] += 1
+        cells[live] = table.next_state[c, a]
+        states[live] = table.states[cells[live]]
+        ended = table.absorbing[c, a] | (lengths[live] >= limit)
+        live = live[~ended]
     return returns, lengths
 
 

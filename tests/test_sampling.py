@@ -748,3 +748,48 @@ def test_calls_reach_to_the_episodes_ends_and_no_further():
     # a call costing nothing extra is then worth one step at a time (no idling).
     mixed = np.bincount(np.r_[np.full(50, 2), np.full(50, 40)])
     assert length(mixed, np.ones(20, np.int64), np.full(20, 100.0), 0.0, 64) == 1
+
+
+@pytest.mark.parametrize("max_episode_steps", [None, 7, 150])
+def test_the_grid_loops_on_its_known_table_equal_stepping_its_environment(max_episode_steps):
+    # collect() and evaluate() look the grid's steps up in its known model; the
+    # environment loops they replace must give the same numbers, random starts,
+    # random actions and a policy drawing its own exploration included.
+    sim = sampling._simulator("gridworld", "windy", {"random_start": True}, 2)
+    assert sim.table is not None
+
+    def explorer(seed):
+        rng = np.random.default_rng(seed)
+
+        def policy(states):
+            greedy = np.where(states[:, 1] < 8, 3, 0)
+            return np.where(rng.random(len(states)) < 0.2, rng.integers(4, size=len(states)), greedy)
+
+        return policy
+
+    for seed in (0, 3):
+        pairs = [
+            (
+                sampling._collect_table(sim, 3000, seed, None, max_episode_steps),
+                sampling._collect_env(sim, 3000, seed, None, max_episode_steps),
+            ),
+            (
+                sampling._collect_table(sim, 2000, seed, explorer(seed), max_episode_steps),
+                sampling._collect_env(sim, 2000, seed, explorer(seed), max_episode_steps),
+            ),
+        ]
+        for table, stepped in pairs:
+            for field in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
+                got, want = getattr(table, field), getattr(stepped, field)
+                assert got.dtype == want.dtype
+                np.testing.assert_array_equal(got, want)
+        table = sampling._evaluate_table(sim, explorer(seed), 20, seed, max_episode_steps)
+        stepped = sampling._evaluate_env(sim, explorer(seed), 20, seed, max_episode_steps)
+        for got, want in zip(table, stepped):
+            assert got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want)
+
+
+def test_the_grid_table_refuses_what_its_environment_refuses():
+    with pytest.raises(ValueError, match="gridworld action must be one of"):
+        sampling.evaluate("gridworld", "windy", lambda s: np.full(len(s), 1.5), 3, seed=0, max_episode_steps=5)

@@ -119,6 +119,13 @@ def _step_cell(cell: tuple[int, int], action: int, push: int) -> tuple[tuple[int
     return (row, col), reward
 
 
+@functools.lru_cache(maxsize=None)
+def _cached_step(cell: tuple[int, int], action: int, push: int) -> tuple[tuple[int, int], float]:
+    """:func:`_step_cell`, remembered: a pure function of at most 100 x 4 x 4 arguments,
+    and the environment's step is the hot path of every loop over it."""
+    return _step_cell(cell, action, push)
+
+
 def free_cells() -> np.ndarray:
     """(S, 2) int64: every cell that is not an obstacle, row-major, the goal included."""
     return np.argwhere(~OBSTACLES).astype(np.int64)
@@ -173,6 +180,8 @@ def transition_model(windy: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
 
 
 def _action_index(action: Any) -> int:
+    if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < len(ACTIONS):
+        return int(action)  # the usual case, without the array checks below
     a = np.asarray(action)
     value = a.reshape(-1)[0] if a.size == 1 and np.issubdtype(a.dtype, np.number) else None
     if value is None or not np.isfinite(value) or value != int(value) or not 0 <= value < len(ACTIONS):
@@ -234,7 +243,7 @@ class GridWorld(dm_env.Environment):
         if self._reset_next_step:
             return self.reset()
         a = _action_index(action)
-        self._cell, reward = _step_cell(self._cell, a, self._push(self._cell[1]))
+        self._cell, reward = _cached_step(self._cell, a, self._push(self._cell[1]))
         self._steps += 1
         if self._cell == GOAL:
             self._reset_next_step = True
@@ -400,7 +409,10 @@ def transition_reward(states: np.ndarray, actions: np.ndarray, next_states: np.n
     -1 where the agent's own move is blocked, +10 where the step ends on the goal."""
     cells = np.rint(np.asarray(states, dtype=np.float64)).astype(np.int64).reshape(-1, 2)
     moved = cells + MOVES[np.asarray(actions, dtype=np.int64)]
-    blocked = np.array([not _free(int(r), int(c)) for r, c in moved], dtype=bool)
+    row, col = moved[:, 0], moved[:, 1]
+    inside = (row >= 0) & (row < N_ROWS) & (col >= 0) & (col < N_COLS)
+    blocked = ~inside  # as _free, for all steps at once
+    blocked[inside] = OBSTACLES[row[inside], col[inside]]
     return np.where(blocked, BUMP_REWARD, 0.0) + np.where(reached_goal(next_states), GOAL_REWARD, 0.0)
 
 

@@ -79,7 +79,7 @@ def as_states(states: Any, name: str = "states", dim: int | None = None) -> np.n
         raise ValueError(f"{name} must be a 2-D array (N, d), got shape {s.shape}")
     if dim is not None and s.shape[1] != dim:
         raise ValueError(f"{name} must have {dim} columns, got shape {s.shape}")
-    if not np.all(np.isfinite(s)):
+    if not np.isfinite(s).all():  # the method, not np.all: one state a call in episode loops
         raise ValueError(f"{name} contains NaN or infinite values")
     return s
 
@@ -298,10 +298,10 @@ class OneHot:
         """(N, 2) cells [row, col] -> (N,) int64 indices ``row * n_cols + col``."""
         s = as_states(states, dim=2)
         cells = np.rint(s)
-        if np.any(np.abs(s - cells) > 1e-9):
+        if (np.abs(s - cells) > 1e-9).any():
             raise ValueError("OneHot states must be integer [row, col] cells")
         rows, cols = cells[:, 0].astype(np.int64), cells[:, 1].astype(np.int64)
-        if np.any((rows < 0) | (rows >= self.n_rows) | (cols < 0) | (cols >= self.n_cols)):
+        if ((rows < 0) | (rows >= self.n_rows) | (cols < 0) | (cols >= self.n_cols)).any():
             raise ValueError(f"OneHot states must lie in the {self.n_rows} x {self.n_cols} grid")
         return rows * self.n_cols + cols
 

@@ -485,10 +485,10 @@ class TabularQ:
         inside = (
             (cells[:, 0] >= 0) & (cells[:, 0] < lookup.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < lookup.shape[1])
         )
-        if np.any(np.abs(rc - cells) > 1e-9) or not np.all(inside):
+        if (np.abs(rc - cells) > 1e-9).any() or not inside.all():  # methods: called one state at a time
             raise ValueError("TabularQ states must be [row, col] cells of the grid")
         idx = lookup[cells[:, 0], cells[:, 1]]
-        if np.any(idx < 0):
+        if (idx < 0).any():
             raise ValueError(f"TabularQ states {cells[idx < 0][:3].tolist()} are not cells of the grid")
         return idx
 
