@@ -430,6 +430,10 @@ class Ledger:
         self.count += len(transitions)
         return transitions
 
+    def charge(self, n: int) -> None:
+        """Counts n transitions a method replays from an earlier budget's collection."""
+        self.count += int(n)
+
     def rollout(self, policy: Callable, run: Callable[[Callable], tuple[np.ndarray, np.ndarray]]) -> float:
         entry = self._rollouts.get(id(policy))
         if entry is None or entry[0] is not policy:
@@ -523,6 +527,7 @@ def transfer_problem(
         target_reward=reward,
         reset_samples=lambda n: ledger.data(reset_samples(n)),
         episode_samples=lambda policy, n, round_: ledger.data(episode_samples(policy, n, round_)),
+        charge=ledger.charge,
     )
 
 

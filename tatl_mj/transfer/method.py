@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -77,6 +78,10 @@ class TransferProblem:
         whole episodes of an index ``policy`` (None: uniformly random actions)
         from the target's own start states, the resets seeded by ``round``
         (the ``online`` data protocol; no resets to chosen states).
+      charge: ``charge(n)`` counts n real-target transitions against the method that
+        it learns from again without asking a hook for them: an earlier budget's
+        collection that it replays, because its own run would have collected the
+        very same data (None: nothing may be replayed).
 
     Every real-target transition a hook hands out or rolls out is counted
     against the method (``target_transitions`` in the records).
@@ -95,6 +100,7 @@ class TransferProblem:
     target_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
     reset_samples: Callable[[int], Transitions] | None = None
     episode_samples: Callable[[Callable | None, int, int], Transitions] | None = None
+    charge: Callable[[int], None] | None = None
 
     def __post_init__(self) -> None:
         if self.source.n_actions != self.target.n_actions:
@@ -463,18 +469,47 @@ class TargetFQI:
         return GreedyPolicy(q, problem.target.action_values, problem.target.discrete, samples_used=used)
 
     def _online(self, problem: TransferProblem, n: int, rng: np.random.Generator) -> QFunction:
-        """Epsilon-greedy FQI: random episodes first, then the data doubled by the current greedy policy."""
+        """Epsilon-greedy FQI: random episodes first, then the data doubled by the current greedy policy.
+
+        A budget's rounds up to where its collection sizes part from a smaller
+        budget's are that budget's very rounds (each round's data, fit and draws
+        follow from the sizes so far and the seed alone), so where the problem can
+        charge replays, each round is kept with the problem and replayed: its data
+        charged again, its fit and the generator's state after it restored.
+        """
         if problem.episode_samples is None:
             raise ValueError(f"{type(self).__name__}(data='online') needs the problem's episode_samples")
-        data = problem.episode_samples(None, min(n, self.online_batch), 0)
+        memo = _problem_memo(problem, "online_rounds") if problem.charge is not None else None
+        sizes: tuple[int, ...] = ()
+        data: Transitions | None = None
+        q: QFunction | None = None
         round_ = 0
         while True:
-            q = self.fit(problem, data, rng)
+            size = min(n, self.online_batch) if data is None else min(len(data), n - len(data))
+            sizes += (size,)
+            entry = memo.get((id(self), sizes)) if memo is not None else None
+            if entry is not None and entry[0] is self:
+                _, data, q, state, collected = entry
+                rng.bit_generator.state = state
+                problem.charge(collected)  # type: ignore[misc]
+            else:
+                with warnings.catch_warnings(record=True) as caught:
+                    policy = None if q is None else _epsilon_greedy(q, self.epsilon, rng)
+                    more = problem.episode_samples(policy, size, round_)
+                    data = more if data is None else Transitions.concatenate([data, more])
+                    q = self.fit(problem, data, rng)
+                for warning in caught:
+                    warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+                if memo is not None and not caught:  # a replay would not repeat a warning
+                    memo[(id(self), sizes)] = (self, data, q, rng.bit_generator.state, len(more))
             if len(data) >= n:
                 return q
             round_ += 1
-            more = problem.episode_samples(_epsilon_greedy(q, self.epsilon, rng), min(len(data), n - len(data)), round_)
-            data = Transitions.concatenate([data, more])
+
+
+def _problem_memo(problem: TransferProblem, name: str) -> dict:
+    """A dict kept with ``problem`` (one experiment, seed and method's run) for a method's replays."""
+    return problem.__dict__.setdefault(f"_memo_{name}", {})  # frozen: a cache, not a field
 
 
 def _epsilon_greedy(q: QFunction, epsilon: float, rng: np.random.Generator) -> Callable[[np.ndarray], np.ndarray]:
