@@ -61,6 +61,10 @@ class TaskDescription:
         ``batch_reward`` serves.
       gymnasium_peer: the Gymnasium environment a user would otherwise pick for
         this task (``tatl bench`` times its loop beside ours), or None.
+      steadiness: state entries whose root mean square over an evaluation
+        episode's steps says how steadily a policy holds the task (the bicycle's
+        roll); with them the evaluation also reports the mean absolute actuator
+        value. Where episodes reach their cap, returns saturate and these do not.
     """
 
     domain: str
@@ -81,9 +85,13 @@ class TaskDescription:
     transition_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
     transition_absorbing: Callable[[np.ndarray], np.ndarray] | None = None
     gymnasium_peer: str | None = None
+    steadiness: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         d = len(self.state_names)
+        unknown = [n for n in self.steadiness if n not in self.state_names]
+        if unknown:
+            raise ValueError(f"TaskDescription.steadiness names {unknown}, not states; valid: {list(self.state_names)}")
         if len(self.periodic) != d:
             raise ValueError(f"TaskDescription.periodic must have {d} entries, got {len(self.periodic)}")
         actions = np.asarray(self.action_values, dtype=np.float64)

@@ -118,6 +118,46 @@ def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) 
     )
 
 
+class _Recorder:
+    """A policy that keeps what it was asked and answered, so that per-episode steadiness can be
+    read after a lockstep evaluation: at step t the live episodes are, in order, those whose
+    length exceeds t."""
+
+    def __init__(self, policy: Callable):
+        self.policy = policy
+        self.calls: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        values = self.policy(states)
+        self.calls.append((np.array(states, dtype=np.float64), np.array(values, dtype=np.float64)))
+        return values
+
+    def per_episode(self, lengths: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Each episode's states (T_i, d) and action values (T_i, m), in step order."""
+        rows: list[list[int]] = [[] for _ in lengths]
+        for t in range(len(self.calls)):
+            for j, i in enumerate(np.flatnonzero(lengths > t)):
+                rows[i].append(j)
+        states = [np.stack([self.calls[t][0][j] for t, j in enumerate(r)]) for r in rows]
+        values = [np.stack([np.atleast_1d(self.calls[t][1][j]) for t, j in enumerate(r)]) for r in rows]
+        return states, values
+
+
+def steadiness(description: TaskDescription, states: list[np.ndarray], values: list[np.ndarray]) -> dict:
+    """Per episode: the RMS over its steps of each ``description.steadiness`` state entry (named
+    ``<entry>_rms``, in the state's units) and the mean absolute actuator value after clipping
+    (``mean_abs_action``). The steps are those the episode lasted: its balanced time, where a
+    fall ends it."""
+    out: dict[str, list[float]] = {}
+    for name in description.steadiness:
+        k = description.state_names.index(name)
+        out[f"{name}_rms"] = [float(np.sqrt(np.mean(s[:, k] ** 2))) for s in states]
+    if not description.discrete:
+        low, high = description.action_low, description.action_high
+        out["mean_abs_action"] = [float(np.mean(np.abs(np.clip(v, low, high)))) for v in values]
+    return out
+
+
 # --- phases I and II ----------------------------------------------------------
 
 
@@ -569,6 +609,7 @@ def run_method(
     if transfer is None:
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     ledger = Ledger()
+    target = describe(spec.target)
     problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
     data = str(getattr(transfer, "data", "shared"))
     eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
@@ -587,7 +628,9 @@ def run_method(
             policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
         learn_s = time.perf_counter() - start
         start = time.perf_counter()
-        returns, lengths = evaluate(spec, preset, policy, eval_seed)
+        recorder = _Recorder(policy) if target.steadiness else None
+        returns, lengths = evaluate(spec, preset, policy if recorder is None else recorder, eval_seed)
+        steady = {} if recorder is None else {"steadiness": steadiness(target, *recorder.per_episode(lengths))}
         reported = getattr(policy, "samples_used", None)
         used = (int(budget) if reported is None else int(reported)) if uses_samples else 0
         stream = used if data in STREAM_DATA else 0
@@ -602,6 +645,7 @@ def run_method(
                 "returns": [float(r) for r in returns],
                 "mean_steps": float(np.mean(lengths)),
                 "steps": [int(n) for n in lengths],  # per episode: survival where episodes are capped
+                **steady,  # per episode, where the target declares steadiness (the bicycle's roll)
                 "learn_s": learn_s,
                 # e.g. Algorithm 2's stopping rule not met within the budget
                 "warnings": sorted({str(w.message) for w in caught}),

@@ -229,6 +229,9 @@ def table(summary: dict) -> str:
         if exp.get("placebo"):
             lines += ["", "Transfer against the same method on a placebo (untrained) source:", ""]
             lines += [f"- {_pair_sentence(p, against='its placebo')}" for p in exp["placebo"]]
+        steady = {m: d["steadiness"] for m, d in exp["methods"].items() if "steadiness" in d}
+        if steady:
+            lines += ["", _steadiness_sentence(steady)]
         best = exp.get("best_baseline")
         if exp.get("vs_best_baseline"):
             lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
@@ -250,6 +253,23 @@ def table(summary: dict) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def _steadiness_sentence(steady: dict) -> str:
+    """One line: each method's steadiness at the largest budget (IQM over seeds [95% CI])."""
+    units = {"roll_rms": ("roll RMS", "deg", 180 / math.pi), "mean_abs_action": ("mean |action|", "", 1.0)}
+    parts = []
+    for method, measures in sorted(steady.items(), key=lambda kv: _order(kv[0])):
+        shown = []
+        for name, estimate in measures.items():
+            label, unit, scale = units.get(name, (name, "", 1.0))
+            scaled = {k: None if estimate[k] is None else estimate[k] * scale for k in ("value", "low", "high")}
+            shown.append(f"{label} {_interval(scaled)}{' ' + unit if unit else ''}")
+        parts.append(f"{method_label(method)}: " + ", ".join(shown))
+    return (
+        "Steadiness at the largest budget, over each episode's steps before it ended (IQM over seeds of the "
+        "per-seed mean [95% CI]; these do not saturate where returns reach the cap): " + "; ".join(parts) + "."
+    )
 
 
 def aggregate_table(summary: dict) -> str:

@@ -341,6 +341,10 @@ def _experiment(
             "final_steps": {
                 str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]
             },
+            # Per seed, each evaluation episode's steadiness at the largest budget (where declared).
+            "final_steadiness": {
+                str(s): recs[s]["curve"][-1]["steadiness"] for s in seeds_done if "steadiness" in recs[s]["curve"][-1]
+            },
             "extra": {
                 k: [recs[s].get(k) for s in seeds_done]
                 for k in ("algorithm2_samples",)
@@ -426,6 +430,22 @@ def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float
         last = np.searchsorted(c, grid, side="right") - 1
         out[i] = np.mean(np.where(last >= 0, y[np.maximum(last, 0)], 0.0))
     return out
+
+
+def _steadiness(experiment: dict) -> None:
+    """Per method, each steadiness measure at the largest budget: per seed the mean over its
+    evaluation episodes, and the IQM over the compared seeds with its interval, in place.
+    Only where every compared seed's record carries it."""
+    seeds = list(compare(experiment).seeds)
+    for data in experiment["methods"].values():
+        per_seed = [data.get("final_steadiness", {}).get(str(s)) for s in seeds]
+        if not seeds or any(v is None for v in per_seed):
+            continue
+        data["steadiness"] = {
+            name: {**stats.iqm_interval([means]).as_dict(), "per_seed": means.tolist()}
+            for name in per_seed[0]
+            for means in [np.array([np.mean(v[name]) for v in per_seed])]
+        }
 
 
 def _survival(experiment: dict, cap: int | None) -> None:
@@ -553,6 +573,7 @@ def build(
         experiment = _experiment(run_dir, spec["name"], seeds, own, reference)
         _statistics(experiment, spec)
         _survival(experiment, ((spec.get("presets") or {}).get(preset) or {}).get("evaluation_steps"))
+        _steadiness(experiment)
         experiments[spec["name"]] = {**experiment, "spec": spec}
     return {
         "experiments": experiments,

@@ -543,4 +543,5 @@ def describe(task: str, **_: Any) -> TaskDescription:
         # Upright to the fall, and about the steer and rates random-policy episodes reach.
         reset_low=np.array([-0.5, -1.5, -ROLL_LIMIT, -1.5]),
         reset_high=np.array([0.5, 1.5, ROLL_LIMIT, 1.5]),
+        steadiness=("roll",),
     )

@@ -101,6 +101,9 @@ class TransferProblem:
     reset_samples: Callable[[int], Transitions] | None = None
     episode_samples: Callable[[Callable | None, int, int], Transitions] | None = None
     charge: Callable[[int], None] | None = None
+    # Rounds a method keeps to replay at a later budget of the same run (see
+    # TargetFQI._online); not part of the problem's identity.
+    replays: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.source.n_actions != self.target.n_actions:
@@ -479,7 +482,7 @@ class TargetFQI:
         """
         if problem.episode_samples is None:
             raise ValueError(f"{type(self).__name__}(data='online') needs the problem's episode_samples")
-        memo = _problem_memo(problem, "online_rounds") if problem.charge is not None else None
+        memo = problem.replays if problem.charge is not None else None
         sizes: tuple[int, ...] = ()
         data: Transitions | None = None
         q: QFunction | None = None
@@ -505,11 +508,6 @@ class TargetFQI:
             if len(data) >= n:
                 return q
             round_ += 1
-
-
-def _problem_memo(problem: TransferProblem, name: str) -> dict:
-    """A dict kept with ``problem`` (one experiment, seed and method's run) for a method's replays."""
-    return problem.__dict__.setdefault(f"_memo_{name}", {})  # frozen: a cache, not a field
 
 
 def _epsilon_greedy(q: QFunction, epsilon: float, rng: np.random.Generator) -> Callable[[np.ndarray], np.ndarray]:
