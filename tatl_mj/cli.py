@@ -151,6 +151,9 @@ def _run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
+    physics = runner.physics_report(args.out)
+    records.write_json(Path(args.out) / "physics.json", physics)
+    print(runner.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     from tatl_mj.experiments import summary as summary_mod
 

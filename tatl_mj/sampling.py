@@ -50,6 +50,7 @@ plain loop over that environment with its actions.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import functools
 import inspect
@@ -82,6 +83,15 @@ _BLOCK = 256  # control steps of an episode's random actions drawn at a time (>=
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
 _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
 
+# MuJoCo substeps this process has taken, by "domain/task": what a run's work is
+# measured against (raw mujoco.rollout speed over the same substeps).
+_SUBSTEPS: collections.Counter = collections.Counter()
+
+
+def physics_substeps() -> dict[str, int]:
+    """MuJoCo substeps this process has taken so far, by ``"domain/task"`` (tasks with physics)."""
+    return dict(_SUBSTEPS)
+
 
 # --- Simulators ------------------------------------------------------------------
 
@@ -104,6 +114,9 @@ class _Simulator:
         self.action_dim = 1 if self.actions.ndim == 1 else self.actions.shape[1]
         physics = getattr(self.env, "physics", None)
         self.fast = physics is not None and bool(getattr(self.env.task, "rollout_compatible", False))
+        self.key = f"{domain}/{task}"
+        # MuJoCo substeps per control step (0 without physics: nothing to count).
+        self.substeps = 0 if physics is None else int(round(self.env.control_timestep() / physics.timestep()))
         self.table: _Table | None = None
         if not self.fast:
             known_model = suite.describe(domain, task, self.kwargs).known_model
@@ -229,6 +242,7 @@ class _Simulator:
         this step, right after a reset.
         """
         self.bound(batch, "ctrl")[ids] = controls
+        _SUBSTEPS[self.key] += len(ids) * self.n_sub
         before = _warning_totals(batch, ids)
         diverged = np.zeros(len(ids), bool)
         if self.legacy_first and first.any():
@@ -257,6 +271,7 @@ class _Simulator:
         Bit-identical to K calls of ``advance``.
         """
         k, n = controls.shape[:2]
+        _SUBSTEPS[self.key] += k * n * self.n_sub
         before, rows = _warning_totals(batch, ids), batch.state[ids].copy()
         # The control of a control step is held over its n_sub substeps, as dm_control does.
         per_substep = np.repeat(controls.transpose(1, 0, 2), self.n_sub, axis=1)
@@ -855,6 +870,7 @@ def _collect_env(
                 break
             state = next_state
     out["last"][-1] = True
+    _SUBSTEPS[sim.key] += n * sim.substeps
     return Transitions(**out)
 
 
@@ -998,6 +1014,7 @@ def _step_from_env(sim: _Simulator, s: np.ndarray, a: np.ndarray) -> np.ndarray:
         env.reset()
         target.set_state_vector(s[i])
         out[i] = _observed_state(env.step(sim.actions[a[i]]))
+    _SUBSTEPS[sim.key] += len(s) * sim.substeps
     return out
 
 
@@ -1096,6 +1113,7 @@ def _evaluate_env(
             if not (timestep.last() or lengths[i] == max_episode_steps):
                 still.append(i)
         live = np.asarray(still, np.int64)
+    _SUBSTEPS[sim.key] += int(lengths.sum()) * sim.substeps
     return returns, lengths
 
 

@@ -32,6 +32,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
+from tatl_mj import sampling
 from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
@@ -107,6 +108,7 @@ def _work(
 ) -> dict:
     """:func:`work`'s unit, which may raise."""
     preset = spec.preset(preset_name)
+    substeps = sampling.physics_substeps()
     if unit.name == SOURCE_UNIT:
         artifacts = pipeline.learn_source(spec, preset, unit.seed)
         blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
@@ -125,6 +127,10 @@ def _work(
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
     record["wall_s"] = time.perf_counter() - start
+    # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
+    record["physics_substeps"] = {
+        key: n - substeps.get(key, 0) for key, n in sampling.physics_substeps().items() if n > substeps.get(key, 0)
+    }
     return {"record": record, "blob": blob}
 
 
@@ -457,6 +463,48 @@ def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
             key = f"{unit} {part}"
             phases[key] = phases.get(key, 0.0) + sum(float(p.get(f"{part}_s", 0.0)) for p in record.get("curve", []))
     return out
+
+
+def physics_report(run_dir: str | Path, seconds: float = 0.3) -> dict[str, Any]:
+    """A run's work against its physics: the summed unit wall times (``work_s``), and the
+    MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
+    (``physics_s``, timed now for ``seconds`` per task), and their ratio."""
+    from tatl_mj import bench
+
+    substeps: dict[str, int] = {}
+    work_s = 0.0
+    for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
+        try:
+            record = read_json(path)
+        except ValueError:
+            continue
+        work_s += float(record.get("wall_s", 0.0))
+        for key, n in record.get("physics_substeps", {}).items():
+            substeps[key] = substeps.get(key, 0) + int(n)
+    by_task = {}
+    for key, n in sorted(substeps.items()):
+        domain, task = key.split("/", 1)
+        timed = bench.time_rollout(domain, task, seconds, threads=1)
+        rate = timed["steps_per_s"] * timed["substeps"]
+        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
+    physics_s = sum(v["raw_s"] for v in by_task.values())
+    return {
+        "work_s": work_s,
+        "physics_s": physics_s,
+        "ratio": work_s / physics_s if physics_s else None,
+        "by_task": by_task,
+    }
+
+
+def format_physics(report: dict[str, Any]) -> str:
+    """One line: work, physics at raw speed, and their ratio."""
+    if not report["physics_s"]:
+        return f"work: {report['work_s']:.1f} s; no MuJoCo substeps recorded (tasks without physics, or older records)"
+    substeps = sum(v["substeps"] for v in report["by_task"].values())
+    return (
+        f"work: {report['work_s']:.1f} s over the records; physics: {substeps:,} MuJoCo substeps = "
+        f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); work / physics = {report['ratio']:.1f}x"
+    )
 
 
 def format_timings(table: dict[str, dict[str, float]]) -> str:

@@ -1,0 +1,39 @@
+"""A run's work is measured against its physics: MuJoCo substeps counted, priced at raw speed."""
+
+import numpy as np
+import pytest
+
+from tatl_mj import sampling, suite
+from tatl_mj.experiments import records, runner
+
+
+def _substeps(key: str) -> int:
+    return sampling.physics_substeps().get(key, 0)
+
+
+def test_evaluation_counts_every_substep_it_takes():
+    env = suite.load("pendulum", "swingup", task_kwargs={"random": 0})
+    n_sub = int(round(env.control_timestep() / env.physics.timestep()))
+    before = _substeps("pendulum/swingup")
+    _, lengths = sampling.evaluate("pendulum", "swingup", lambda s: np.zeros((len(s), 1)), 3, 0, max_episode_steps=40)
+    assert lengths.tolist() == [40, 40, 40]  # the pendulum never ends early
+    assert _substeps("pendulum/swingup") - before == 3 * 40 * n_sub
+    # One-step queries: one control step each.
+    before = _substeps("pendulum/swingup")
+    sampling.step_from("pendulum", "swingup", np.zeros((7, 2)), np.zeros(7, np.int64))
+    assert _substeps("pendulum/swingup") - before == 7 * n_sub
+
+
+def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monkeypatch):
+    run = records.RunDirectory(tmp_path)
+    for seed, n in ((0, 1000), (1, 3000)):
+        path = run.record_path("exp", seed, "ta-tl")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        records.write_json(path, {"wall_s": 2.0, "physics_substeps": {"pendulum/swingup": n}})
+    timed = {"steps_per_s": 500.0, "substeps": 2}  # 1,000 substeps a second
+    monkeypatch.setattr("tatl_mj.bench.time_rollout", lambda domain, task, seconds, threads: timed)
+    report = runner.physics_report(tmp_path)
+    assert report["work_s"] == 4.0 and report["physics_s"] == pytest.approx(4.0)
+    assert report["ratio"] == pytest.approx(1.0)
+    assert report["by_task"]["pendulum/swingup"]["substeps"] == 4000
+    assert "work / physics = 1.0x" in runner.format_physics(report)
