@@ -30,10 +30,13 @@ def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monke
         path = run.record_path("exp", seed, "ta-tl")
         path.parent.mkdir(parents=True, exist_ok=True)
         records.write_json(path, {"wall_s": 2.0, "physics_substeps": {"pendulum/swingup": n}})
+    older = run.record_path("exp", 0, "rl")
+    records.write_json(older, {"wall_s": 50.0})  # no count: left out of both sides
     timed = {"steps_per_s": 500.0, "substeps": 2}  # 1,000 substeps a second
     monkeypatch.setattr("tatl_mj.bench.time_rollout", lambda domain, task, seconds, threads: timed)
     report = runner.physics_report(tmp_path)
     assert report["work_s"] == 4.0 and report["physics_s"] == pytest.approx(4.0)
     assert report["ratio"] == pytest.approx(1.0)
     assert report["by_task"]["pendulum/swingup"]["substeps"] == 4000
-    assert "work / physics = 1.0x" in runner.format_physics(report)
+    assert report["records_without_counts"] == 1
+    assert "work / physics = 1.0x (1 older records without counts left out of both)" in runner.format_physics(report)

@@ -468,18 +468,22 @@ def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
 def physics_report(run_dir: str | Path, seconds: float = 0.3) -> dict[str, Any]:
     """A run's work against its physics: the summed unit wall times (``work_s``), and the
     MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
-    (``physics_s``, timed now for ``seconds`` per task), and their ratio."""
+    (``physics_s``, timed now for ``seconds`` per task), and their ratio. Records without
+    a substep count (older ones) are left out of both."""
     from tatl_mj import bench
 
     substeps: dict[str, int] = {}
-    work_s = 0.0
+    work_s, uncounted = 0.0, 0
     for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
         try:
             record = read_json(path)
         except ValueError:
             continue
+        if "physics_substeps" not in record:
+            uncounted += 1  # written before substeps were counted: neither side counts it
+            continue
         work_s += float(record.get("wall_s", 0.0))
-        for key, n in record.get("physics_substeps", {}).items():
+        for key, n in record["physics_substeps"].items():
             substeps[key] = substeps.get(key, 0) + int(n)
     by_task = {}
     for key, n in sorted(substeps.items()):
@@ -493,6 +497,7 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3) -> dict[str, Any]:
         "physics_s": physics_s,
         "ratio": work_s / physics_s if physics_s else None,
         "by_task": by_task,
+        "records_without_counts": uncounted,
     }
 
 
@@ -501,9 +506,12 @@ def format_physics(report: dict[str, Any]) -> str:
     if not report["physics_s"]:
         return f"work: {report['work_s']:.1f} s; no MuJoCo substeps recorded (tasks without physics, or older records)"
     substeps = sum(v["substeps"] for v in report["by_task"].values())
+    left_out = report.get("records_without_counts", 0)
+    note = f" ({left_out} older records without counts left out of both)" if left_out else ""
     return (
         f"work: {report['work_s']:.1f} s over the records; physics: {substeps:,} MuJoCo substeps = "
-        f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); work / physics = {report['ratio']:.1f}x"
+        f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); "
+        f"work / physics = {report['ratio']:.1f}x{note}"
     )
 
 
