@@ -34,7 +34,7 @@ def main(paths: list[str]) -> None:
                 learner = RL(**spec.methods["rl"])
                 problem = pipeline.transfer_problem(spec, preset, _no_source(spec, preset), seed)
                 policy = learner.learn(problem, problem.reset_samples(SAMPLES))
-                seed_eval = pipeline.derive_seed(seed, spec.name, "evaluation")
+                seed_eval = pipeline.derive_seed(seed, spec.stream_name, "evaluation")
                 returns.append(float(np.mean(pipeline.evaluate(spec, preset, policy, seed_eval)[0])))
             print(f"{path} [presets.{name}] reference_return = {np.mean(returns):.0f}  # seeds 0-4: {returns}")
 

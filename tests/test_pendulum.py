@@ -237,3 +237,36 @@ def test_actions_spec_and_rollout_flags():
         assert env.control_timestep() == pytest.approx(0.05)
         assert env.observation_spec()["state"].shape == (2,)
         assert env.task.rollout_compatible is (task != "swingup_timevarying")
+
+
+def test_flipped_gain_scales_the_torque_a_control_gives():
+    """From rest at hanging gravity exerts no torque: the first step's speed change is the
+    control's, opposite in sign to the plain swing-up's and proportional to the gain."""
+    from tatl_mj import suite
+
+    changes = {}
+    for task, gain in (("swingup", None), ("swingup_flipped", 1.0), ("swingup_flipped", 0.5)):
+        kwargs = {"random": 0} if gain is None else {"random": 0, "gain": gain}
+        env = suite.load("pendulum", task, task_kwargs=kwargs)
+        env.reset()
+        env.physics.set_state_vector(np.array([np.pi, 0.0]))
+        changes[(task, gain)] = env.step(np.array([2.0])).observation["state"][1]
+    assert changes[("swingup_flipped", 1.0)] == pytest.approx(-changes[("swingup", None)], rel=1e-9)
+    assert changes[("swingup_flipped", 0.5)] == pytest.approx(0.5 * changes[("swingup_flipped", 1.0)], rel=0.02)
+    with pytest.raises(ValueError, match="gain must be a number > 0, got 0.0"):
+        suite.load("pendulum", "swingup_flipped", task_kwargs={"gain": 0.0})
+
+
+def test_timevarying_amplitude_sets_the_schedule_and_zero_is_the_plain_pendulum():
+    assert pendulum.timevarying_schedule(0, amplitude=0.2) == pytest.approx((1.2, 1.2))
+    assert pendulum.timevarying_schedule(50, amplitude=0.2) == pytest.approx((0.8, 0.8))
+    plain = suite.load("pendulum", "swingup", task_kwargs={"random": 3})
+    still = suite.load("pendulum", "swingup_timevarying", task_kwargs={"random": 3, "amplitude": 0.0})
+    a, b = plain.reset(), still.reset()
+    np.testing.assert_array_equal(a.observation["state"], b.observation["state"])
+    for u in (4.0, -4.0, 0.0, 4.0):
+        np.testing.assert_allclose(
+            plain.step(np.array([u])).observation["state"], still.step(np.array([u])).observation["state"], rtol=1e-12
+        )
+    with pytest.raises(ValueError, match="must exceed the amplitude 1.0"):
+        suite.load("pendulum", "swingup_timevarying", task_kwargs={"amplitude": 1.0})

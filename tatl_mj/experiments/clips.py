@@ -95,7 +95,7 @@ def _render(
     needs_artifacts = method != RANDOM or with_source
     artifacts = _artifacts(spec, preset, seed, run_dir) if needs_artifacts else None
     policy = clip_policy(spec, preset, seed, method, artifacts)
-    kwargs = {**target.task_kwargs, "random": pipeline.derive_seed(seed, spec.name, "clip")}
+    kwargs = {**target.task_kwargs, "random": pipeline.derive_seed(seed, spec.stream_name, "clip")}
     env = suite.load(target.domain, target.task, task_kwargs=kwargs)
     source = None
     if with_source:

@@ -169,9 +169,9 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
         next_state, reward, absorbing, cells = source.known_model()
         return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     n_actions = source.n_actions
-    data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.name, "source-data"))
+    data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.stream_name, "source-data"))
     regressor = fqi.make_regressor(
-        {**learner.regressor_spec(), "seed": derive_seed(seed, spec.name, "source-fqi")},
+        {**learner.regressor_spec(), "seed": derive_seed(seed, spec.stream_name, "source-fqi")},
         data.state_dim,
     )
     q = fqi.fitted_q_iteration(data, n_actions, regressor, learner.gamma, learner.iterations)
@@ -190,7 +190,7 @@ def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
         side = dataclasses.replace(
             side, data=dataclasses.replace(side.data, sampling="episodes", state_low=(), state_high=())
         )
-    return collect(side, n, derive_seed(seed, spec.name, "alignment-source"))
+    return collect(side, n, derive_seed(seed, spec.stream_name, "alignment-source"))
 
 
 def _learn_mapping(
@@ -214,7 +214,7 @@ def _learn_mapping(
     n = preset.alignment_samples
     source = _alignment_source(spec, n, seed)
     target = target_stream.head(n)
-    rng = np.random.default_rng(derive_seed(seed, spec.name, "alignment"))
+    rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment"))
     if kind == "transition_alignment":
         settings = alignment.TransitionAlignment.from_dict(
             {k: tuple(v) if isinstance(v, list) else v for k, v in spec.mapping.transition.items()}
@@ -249,7 +249,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 
     start = time.perf_counter()
     stream_size = max(max(preset.target_budgets), preset.alignment_samples)
-    target_stream = collect(spec.target, stream_size, derive_seed(seed, spec.name, "target-data"))
+    target_stream = collect(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
     timings["target_sampling_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -261,7 +261,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
         spec,
         preset,
         random_policy(spec.target, derive_seed(seed, "random-policy")),
-        derive_seed(seed, spec.name, "evaluation"),
+        derive_seed(seed, spec.stream_name, "evaluation"),
     )
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
@@ -328,7 +328,7 @@ def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -
     env = suite.load(
         target.domain,
         target.task,
-        task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.name, "policy-data")},
+        task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.stream_name, "policy-data")},
     )
     description = describe(target)
     actions = np.arange(description.n_actions) if description.discrete else suite.action_set(target.domain)
@@ -398,7 +398,7 @@ def _target_reward(target: Side) -> Callable | None:
 
 def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
     """Seeds the start states of Algorithm 2's rollouts, real and modelled: never the evaluation's."""
-    return derive_seed(seed, spec.name, "algorithm2-starts")
+    return derive_seed(seed, spec.stream_name, "algorithm2-starts")
 
 
 def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None) -> Callable | None:
@@ -494,7 +494,7 @@ def _reset_samples(
 
     def samples(n: int) -> Transitions:
         if not cache or len(cache[0]) < n:
-            rng = np.random.default_rng(derive_seed(seed, spec.name, "reset-data"))
+            rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "reset-data"))
             size = max(n, largest)
             states = description.reset_states(size, rng)
             cache[:] = [one_step(spec.target, states, rng.integers(description.n_actions, size=size), reward)]
@@ -512,7 +512,7 @@ def _episode_samples(spec: ExperimentSpec, seed: int) -> Callable[[Callable | No
             target.domain,
             target.task,
             n,
-            derive_seed(seed, spec.name, "online-data", str(round_)),
+            derive_seed(seed, spec.stream_name, "online-data", str(round_)),
             policy=policy,
             task_kwargs=target.task_kwargs,
             max_episode_steps=target.data.episode_steps,
@@ -552,14 +552,14 @@ def transfer_problem(
     episode_samples = _episode_samples(spec, seed)
     source_q = artifacts.source_q
     if placebo:
-        source_q = placebo_q(source_q, derive_seed(seed, spec.name, "placebo"))
+        source_q = placebo_q(source_q, derive_seed(seed, spec.stream_name, "placebo"))
     return method.TransferProblem(
         source_q=source_q,
         mapping=QueriedMapping(artifacts.mapping, partial(_source_region, spec.source, source)),
         source_step=partial(_source_step, spec.source, source),
         source=source,
         target=target,
-        seed=derive_seed(seed, spec.name, "target-learning"),
+        seed=derive_seed(seed, spec.stream_name, "target-learning"),
         target_return=target_return,
         model_return=_model_return(spec, preset, seed, reward),
         target_step=partial(_target_step, spec.target, target),
@@ -612,7 +612,7 @@ def run_method(
     target = describe(spec.target)
     problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
     data = str(getattr(transfer, "data", "shared"))
-    eval_seed = derive_seed(seed, spec.name, "evaluation")  # same start states for every method
+    eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
     # A method that uses no target samples (an oracle, a reference) learns the same
     # policy at every budget: it is learned and evaluated once and its point repeated.
     uses_samples = getattr(transfer, "uses_samples", True)

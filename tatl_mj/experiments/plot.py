@@ -762,6 +762,116 @@ def _caption(comparison: Comparison, clipped_values: list[float], reference: flo
     return "\n".join(textwrap.wrap(" ".join(parts), width=170))
 
 
+# --- Sweeps: where transfer is credited ---------------------------------------------
+
+
+def sweeps(summary: dict) -> dict[str, list[tuple[dict, dict]]]:
+    """Sweep name -> its conditions in run order, each as (swept values, experiment)."""
+    out: dict[str, list[tuple[dict, dict]]] = {}
+    for exp in summary["experiments"].values():
+        spec = exp.get("spec") or {}
+        if spec.get("condition"):
+            out.setdefault(spec.get("streams") or spec["name"], []).append((spec["condition"], exp))
+    return out
+
+
+def _credit_pairs(exp: dict) -> list[tuple[str, dict]]:
+    return [("ablation", p) for p in exp.get("ablations", [])] + [("placebo", p) for p in exp.get("placebo", [])]
+
+
+def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
+    """Markdown: per condition, P(method > its ablation or placebo) [95% CI] and the verdict."""
+    pairs = sorted({(kind, p["method"], p["ablation"]) for _, exp in cells for kind, p in _credit_pairs(exp)})
+    params = list(cells[0][0])
+    header = "| " + " | ".join(params) + " | " + " | ".join(f"`{m}` > `{a}`" for _, m, a in pairs) + " |"
+    lines = [f"### Credit map: `{name}`", "", header, "|---" * (len(params) + len(pairs)) + "|"]
+    for condition, exp in cells:
+        found = {(kind, p["method"], p["ablation"]): p for kind, p in _credit_pairs(exp)}
+        row = [str(condition[k]) for k in params]
+        for key in pairs:
+            pair = found.get(key)
+            row.append("n/a" if pair is None else f"{_interval(pair['probability_of_improvement'])} {pair['verdict']}")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines + [""])
+
+
+def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> Path:
+    """For one sweep: (left) P(method > its ablation or placebo) with its 95% interval over the
+    swept parameter (curves; a heat map of the first pair for two parameters); (right) each
+    method's normalised final IQM with its band (curves; the first transfer method's for two)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    params = list(cells[0][0])
+    fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4))
+    pairs = sorted({(kind, p["method"], p["ablation"]) for _, exp in cells for kind, p in _credit_pairs(exp)})
+    methods = sorted({m for _, exp in cells for m, d in exp["methods"].items() if "final_iqm" in d}, key=_order)
+    colors = method_colors(methods)
+
+    def estimate(exp: dict, key: tuple) -> tuple[float, float, float]:
+        pair = next((p for kind, p in _credit_pairs(exp) if (kind, p["method"], p["ablation"]) == key), None)
+        e = (pair or {}).get("probability_of_improvement") or {}
+        value = np.nan if e.get("value") is None else e["value"]
+        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+
+    def final(exp: dict, method: str) -> tuple[float, float, float]:
+        e = exp["methods"].get(method, {}).get("final_iqm") or {}
+        value = np.nan if e.get("value") is None else e["value"]
+        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+
+    if len(params) == 1:
+        x = np.arange(len(cells))
+        for i, key in enumerate(pairs):
+            v, lo, hi = np.array([estimate(exp, key) for _, exp in cells]).T
+            color = colors.get(key[1], "black")
+            ax_p.errorbar(x + 0.06 * (i - len(pairs) / 2), v, yerr=[v - lo, hi - v], marker="o", capsize=3,
+                          ls=LINE_STYLES[i % len(LINE_STYLES)], color=color, label=f"{key[1]} > {key[2]}")  # fmt: skip
+        for i, method in enumerate(methods):
+            v, lo, hi = np.array([final(exp, method) for _, exp in cells]).T
+            ax_s.plot(x, v, marker="o", color=colors[method], ls=LINE_STYLES[i % len(LINE_STYLES)], label=method)
+            ax_s.fill_between(x, lo, hi, color=colors[method], alpha=0.15, lw=0)
+        labels = [str(c[params[0]]) for c, _ in cells]
+        for ax in (ax_p, ax_s):
+            ax.set_xticks(x, labels)
+            ax.set_xlabel(params[0])
+            ax.grid(alpha=0.25)
+            ax.legend(fontsize=7, frameon=False)
+        ax_p.axhline(0.5, color="black", ls="--", lw=0.9)
+        ax_p.set_ylim(-0.02, 1.02)
+        ax_s.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
+    else:
+        first, second = ([c[k] for c, _ in cells] for k in params)
+        rows, cols = sorted(set(first), key=first.index), sorted(set(second), key=second.index)
+        for ax, value_of, title in (
+            (ax_p, lambda exp: estimate(exp, pairs[0])[0] if pairs else np.nan, "P"),
+            (ax_s, lambda exp: final(exp, methods[0])[0] if methods else np.nan, "IQM"),
+        ):
+            grid = np.full((len(rows), len(cols)), np.nan)
+            for c, exp in cells:
+                grid[rows.index(c[params[0]]), cols.index(c[params[1]])] = value_of(exp)
+            image = ax.imshow(grid, cmap="RdBu" if title == "P" else "viridis", vmin=0 if title == "P" else None,
+                              vmax=1 if title == "P" else None, aspect="auto")  # fmt: skip
+            for (r, c), v in np.ndenumerate(grid):
+                ax.text(c, r, "n/a" if np.isnan(v) else f"{v:.2f}", ha="center", va="center", fontsize=8)
+            ax.set_xticks(range(len(cols)), [str(v) for v in cols])
+            ax.set_yticks(range(len(rows)), [str(v) for v in rows])
+            ax.set_xlabel(params[1])
+            ax.set_ylabel(params[0])
+            fig.colorbar(image, ax=ax)
+    pair_text = f"{pairs[0][1]} > {pairs[0][2]}" if pairs and len(params) == 2 else "method > its ablation or placebo"
+    ax_p.set_title(f"(a) P({pair_text}) on the area under the curve, 95% CI", fontsize=10)
+    focus = f" of {methods[0]}" if methods and len(params) == 2 else ""
+    ax_s.set_title(f"(b) normalised final score{focus}: IQM over seeds, 95% band", fontsize=10)
+    fig.suptitle(f"Where transfer is credited: {name}", fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def plot(run_dir: str | Path) -> list[Path]:
     """Writes DIR/figures/EXP.png and DIR/results.md; returns the written paths."""
     run_dir = Path(run_dir)
@@ -778,7 +888,11 @@ def plot(run_dir: str | Path) -> list[Path]:
         written.append(figure(name, experiment, figures / f"{name}.png"))
     if summary.get("aggregate"):
         written.append(profile(summary, figures / "performance_profile.png"))
+    credit = []
+    for name, cells in sweeps(summary).items():
+        written.append(credit_map(name, cells, figures / f"credit_{name}.png"))
+        credit.append(credit_table(name, cells))
     results = run_dir / "results.md"
-    results.write_text(table(summary) + "\n" + aggregate_table(summary) + "\n")
+    results.write_text(table(summary) + "\n" + aggregate_table(summary) + "\n" + "\n".join(credit))
     written.append(results)
     return written

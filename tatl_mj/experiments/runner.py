@@ -37,7 +37,7 @@ from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
-from tatl_mj.experiments.spec import ExperimentSpec, spec_to_dict
+from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.method import TransferMethod
 
@@ -371,8 +371,10 @@ def run(
     ``methods``: None runs each spec's own ``[methods]``; a list of names runs
     those built-ins; a dict maps names to method objects implementing
     ``tatl_mj.transfer.method.TransferMethod`` (picklable, to run in worker processes).
+    A spec with a ``[sweep]`` runs as one experiment per condition (``spec.conditions``).
     """
     dispatch = _dispatcher(executor, workers, address)
+    specs = [condition for spec in specs for condition in conditions(spec)]  # a sweep: one per condition
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise ValueError(f"two specs share an experiment name: {names}")

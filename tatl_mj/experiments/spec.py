@@ -141,11 +141,50 @@ class ExperimentSpec:
     methods: dict
     presets: dict
     path: str = ""
+    # A sweep over target conditions: one or two target task_kwargs, each a list of
+    # values; ``conditions`` expands it into one experiment per combination.
+    sweep: dict = dataclasses.field(default_factory=dict)
+    # Set on a sweep's conditions: the swept values, and the name their random
+    # streams derive from (the sweep's own, so each condition draws what the spec
+    # run alone with those task_kwargs draws).
+    condition: dict = dataclasses.field(default_factory=dict)
+    streams: str = ""
 
     def preset(self, name: str) -> Preset:
         if name not in self.presets:
             raise SpecError(f"{self.path}: unknown preset {name!r}; valid presets: {sorted(self.presets)}")
         return self.presets[name]
+
+    @property
+    def stream_name(self) -> str:
+        """The name every derived seed of this experiment starts from."""
+        return self.streams or self.name
+
+
+def _value_text(value: Any) -> str:
+    return repr(value) if not isinstance(value, str) else value
+
+
+def conditions(spec: ExperimentSpec) -> list[ExperimentSpec]:
+    """The experiments a spec stands for: itself, or one per combination of its sweep's values,
+    named ``NAME.PARAM-VALUE[.PARAM-VALUE]`` with those target task_kwargs, kept apart in
+    their own records and resumable like any experiment."""
+    if not spec.sweep:
+        return [spec]
+    names = list(spec.sweep)
+    grids = [[]]  # type: list[list[tuple[str, Any]]]
+    for name in names:
+        grids = [g + [(name, v)] for g in grids for v in spec.sweep[name]]
+    out = []
+    for combo in grids:
+        suffix = ".".join(f"{k}-{_value_text(v)}" for k, v in combo)
+        target = dataclasses.replace(spec.target, task_kwargs={**spec.target.task_kwargs, **dict(combo)})
+        out.append(
+            dataclasses.replace(
+                spec, name=f"{spec.name}.{suffix}", target=target, sweep={}, condition=dict(combo), streams=spec.name
+            )
+        )
+    return out
 
 
 def _fail(path: str, key: str, expected: str, got: Any) -> typing.NoReturn:
@@ -339,6 +378,39 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
 
 
+def _check_sweep(spec: ExperimentSpec) -> None:
+    p = spec.path
+    if spec.condition or spec.streams:
+        raise SpecError(f"{p}: keys 'condition' and 'streams' are set by a sweep, not by a spec; use [sweep]")
+    if not spec.sweep:
+        return
+    if len(spec.sweep) > 2:
+        _fail(p, "sweep", "one or two target task_kwargs, each a list of values", sorted(spec.sweep))
+    for name, values in spec.sweep.items():
+        if name in spec.target.task_kwargs:
+            raise SpecError(f"{p}: key 'sweep.{name}' is also fixed in target.task_kwargs; give it in one place")
+        ok = (
+            isinstance(values, (list, tuple))
+            and values
+            and all(isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in values)
+        )
+        if not ok or len(set(values)) != len(values):
+            _fail(p, f"sweep.{name}", "a non-empty list of distinct numbers or strings", values)
+    from tatl_mj import suite
+
+    for condition in conditions(spec):
+        try:
+            _describe(condition, "target")
+            target = condition.target  # built once: the task's own checks of its kwargs
+            suite.load(target.domain, target.task, task_kwargs={**target.task_kwargs, "random": 0})
+        except SpecError as error:
+            raise SpecError(f"{error} (in the sweep's condition {condition.condition})") from None
+        except (TypeError, ValueError) as error:
+            raise SpecError(f"{p}: key 'sweep': {error} (in the sweep's condition {condition.condition})") from None
+        if not NAME_PATTERN.fullmatch(condition.name):
+            _fail(p, "sweep", f"values that make a folder name ({NAME_PATTERN.pattern})", condition.name)
+
+
 def _check(spec: ExperimentSpec) -> None:
     """Value checks that types alone cannot express, through the factories the workers use."""
     p = spec.path
@@ -350,6 +422,7 @@ def _check(spec: ExperimentSpec) -> None:
     _check_source_learning(spec, source)
     _check_mapping(spec, source, target)
     _check_methods(spec, source, target)
+    _check_sweep(spec)
     if not spec.presets:
         raise SpecError(f"{p}: at least one [presets.NAME] table is required (e.g. smoke, paper)")
     for name, preset in spec.presets.items():

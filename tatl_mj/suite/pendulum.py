@@ -75,10 +75,12 @@ class PendulumParams:
         common.check_params(self)
 
 
-def timevarying_schedule(step: int, params: PendulumParams | None = None) -> tuple[float, float]:
+def timevarying_schedule(
+    step: int, params: PendulumParams | None = None, amplitude: float = SCHEDULE_AMPLITUDE
+) -> tuple[float, float]:
     """(length m, mass kg) during control step ``step`` of ``swingup_timevarying``."""
     params = params or PendulumParams()
-    wave = SCHEDULE_AMPLITUDE * math.cos(math.pi * step / (SCHEDULE_PERIOD_STEPS / 2))
+    wave = amplitude * math.cos(math.pi * step / (SCHEDULE_PERIOD_STEPS / 2))
     return params.length + wave, params.mass + wave
 
 
@@ -158,12 +160,13 @@ class Physics(common.StatePhysics):
         self.forward()
 
 
-def make_physics(params: PendulumParams | None = None, flipped: bool = False) -> Physics:
-    """A compiled pendulum with ``params`` applied; ``flipped`` reverses the control's sign."""
+def make_physics(params: PendulumParams | None = None, flipped: bool = False, gain: float = 1.0) -> Physics:
+    """A compiled pendulum with ``params`` applied; ``flipped`` reverses the control's sign,
+    ``gain`` scales the torque a control gives (its actuator's gear)."""
     params = as_params(params)
     physics = common.compile_physics(Physics, *common.read_model("pendulum.xml"))
     model = physics.named.model
-    model.actuator_gear["torque"][0] = -1.0 if flipped else 1.0
+    model.actuator_gear["torque"][0] = -gain if flipped else gain
     model.actuator_ctrlrange["torque"] = (-params.max_torque, params.max_torque)
     physics.model.opt.gravity[:] = (0.0, 0.0, -params.gravity)
     physics.set_pendulum(params.length, params.mass)  # also runs mj_setConst
@@ -173,10 +176,17 @@ def make_physics(params: PendulumParams | None = None, flipped: bool = False) ->
 class Task(common.StateTask):
     """Swing the pendulum up and hold it: reward ``-10 theta^2 - 5 theta_dot^2``."""
 
-    def __init__(self, params: PendulumParams, timevarying: bool = False, random: Any = None) -> None:
+    def __init__(
+        self,
+        params: PendulumParams,
+        timevarying: bool = False,
+        random: Any = None,
+        amplitude: float = SCHEDULE_AMPLITUDE,
+    ) -> None:
         super().__init__(random=random)
         self.params = params
         self.timevarying = timevarying
+        self.amplitude = amplitude
         # The model changes every step, so mujoco.rollout cannot replay it.
         self.rollout_compatible = not timevarying
         self.step_index = 0
@@ -190,12 +200,12 @@ class Task(common.StateTask):
     def initialize_episode(self, physics: Physics) -> None:
         self.step_index = 0
         if self.timevarying:
-            physics.set_pendulum(*timevarying_schedule(0, self.params))
+            physics.set_pendulum(*timevarying_schedule(0, self.params, self.amplitude))
         super().initialize_episode(physics)
 
     def before_step(self, action: Any, physics: Physics) -> None:
         if self.timevarying:
-            physics.set_pendulum(*timevarying_schedule(self.step_index, self.params))
+            physics.set_pendulum(*timevarying_schedule(self.step_index, self.params, self.amplitude))
         self.step_index += 1
         super().before_step(action, physics)
 
@@ -232,17 +242,22 @@ def swingup_timevarying(
     random: Any = None,
     environment_kwargs: dict[str, Any] | None = None,
     params: PendulumParams | None = None,
+    amplitude: float = SCHEDULE_AMPLITUDE,
 ) -> common.Environment:
-    """Swing-up with length and mass following :func:`timevarying_schedule` every step."""
+    """Swing-up with length and mass following :func:`timevarying_schedule` every step;
+    ``amplitude`` (m and kg, >= 0) is how far they swing about their nominal values."""
     params = as_params(params)
+    amplitude = common.real(amplitude, "pendulum amplitude")
+    if not (math.isfinite(amplitude) and amplitude >= 0):
+        raise ValueError(f"amplitude must be a number >= 0 (m and kg), got {amplitude!r}")
     for name in ("length", "mass"):
-        if getattr(params, name) <= SCHEDULE_AMPLITUDE:
+        if getattr(params, name) <= amplitude:
             raise ValueError(
-                f"PendulumParams.{name} must exceed {SCHEDULE_AMPLITUDE} for swingup_timevarying "
-                f"(the schedule subtracts up to {SCHEDULE_AMPLITUDE}), got {getattr(params, name)!r}"
+                f"PendulumParams.{name} must exceed the amplitude {amplitude} for swingup_timevarying "
+                f"(the schedule subtracts up to it), got {getattr(params, name)!r}"
             )
     physics = make_physics(params)
-    task = Task(params, timevarying=True, random=random)
+    task = Task(params, timevarying=True, random=random, amplitude=amplitude)
     return _environment(physics, task, time_limit, environment_kwargs)
 
 
@@ -251,9 +266,14 @@ def swingup_flipped(
     random: Any = None,
     environment_kwargs: dict[str, Any] | None = None,
     params: PendulumParams | None = None,
+    gain: float = 1.0,
 ) -> common.Environment:
-    """Swing-up whose control acts with the opposite sign (the paper's negative transfer)."""
-    physics = make_physics(params, flipped=True)
+    """Swing-up whose control acts with the opposite sign (the paper's negative transfer),
+    scaled by ``gain`` (> 0: the torque per unit of control)."""
+    gain = common.real(gain, "pendulum gain")
+    if not (math.isfinite(gain) and gain > 0):
+        raise ValueError(f"gain must be a number > 0, got {gain!r}")
+    physics = make_physics(params, flipped=True, gain=gain)
     return _environment(physics, Task(as_params(params), random=random), time_limit, environment_kwargs)
 
 
