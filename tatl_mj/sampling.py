@@ -959,6 +959,8 @@ def evaluate(
     with sim.seeded_env(seed) as env:
         task_obj = env.task
         randoms = _evaluation_randoms(seed, n_episodes) if task_obj.control_noise else None
+        # Optional in the domain contract: each row's controls from its own stream at once.
+        controls_each = getattr(task_obj, "controls_each", None)
         batch = sim.new_batch(n_episodes)
         live = np.arange(n_episodes)
         states = sim.start_episodes(batch, live, env)
@@ -968,6 +970,8 @@ def evaluate(
             values = _check_values(policy(states), len(live), sim)
             if randoms is None:
                 controls = task_obj.controls(values, None)
+            elif controls_each is not None:  # the same draws in one call
+                controls = controls_each(values, [randoms[i] for i in live])
             else:
                 controls = np.concatenate(
                     [task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)]
