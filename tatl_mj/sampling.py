@@ -82,6 +82,7 @@ _MOST_STEPS = 64  # most control steps collect() takes in one call
 _BLOCK = 256  # control steps of an episode's random actions drawn at a time (>= _MOST_STEPS)
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
 _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
+_SMALL_QUERY = 16  # step_from queries of fewer states are stepped on one thread
 
 # MuJoCo substeps this process has taken, by "domain/task": what a run's work is
 # measured against (raw mujoco.rollout speed over the same substeps).
@@ -132,6 +133,7 @@ class _Simulator:
         self.blank_row = np.empty(mujoco.mj_stateSize(self.model, _INTEGRATION))
         mujoco.mj_getState(self.model, data, self.blank_row, _INTEGRATION)
         self._batch: mujoco.batch.Batch | None = None
+        self._small_batch: mujoco.batch.Batch | None = None
         # Live views of each batch's fields: Batch.bind builds one per call (~15 us,
         # five a query or a collection's pass, as much as a small batch's physics).
         self._views: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -179,8 +181,16 @@ class _Simulator:
         """The cached Batch for one-step queries, grown to at least ``nsim`` simulations.
 
         collect() and evaluate() make their own, so that a policy may query
-        step_from() while they run.
+        step_from() while they run. A query of fewer than ``_SMALL_QUERY`` states
+        runs on one thread: handing a few simulations to the thread pool and
+        waiting for them costs more than their physics (a horizon controller's
+        5-state cart-pole queries took twice the time on two threads). Each
+        simulation steps alone either way, so the numbers are the same.
         """
+        if nsim < _SMALL_QUERY:
+            if self._small_batch is None:
+                self._small_batch = mujoco.batch.Batch(self.model, nsim=_SMALL_QUERY - 1, nthread=1)
+            return self._small_batch
         if self._batch is None or self._batch.nsim < nsim:
             self._batch = self.new_batch(nsim)
         return self._batch
@@ -1055,6 +1065,8 @@ def evaluate(
     with sim.seeded_env(seed) as env:
         task_obj = env.task
         randoms = _evaluation_randoms(seed, n_episodes) if task_obj.control_noise else None
+        # Optional in the domain contract: each row's controls from its own stream at once.
+        controls_each = getattr(task_obj, "controls_each", None)
         batch = sim.new_batch(n_episodes)
         live = np.arange(n_episodes)
         states = sim.start_episodes(batch, live, env)
@@ -1064,6 +1076,8 @@ def evaluate(
             values = _check_values(policy(states), len(live), sim)
             if randoms is None:
                 controls = task_obj.controls(values, None)
+            elif controls_each is not None:  # the same draws in one call
+                controls = controls_each(values, [randoms[i] for i in live])
             else:
                 controls = np.concatenate(
                     [task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)]

@@ -245,6 +245,20 @@ def test_controls_draw_rider_noise_and_add_speed():
     np.testing.assert_array_equal(again[:, 1], ctrl[:, 1])
 
 
+def test_controls_each_is_controls_row_by_row():
+    for noise in (0.02, 0.0):
+        task = bicycle.Task(speed=3.0, cg_noise=noise)
+        values = np.array([[2.0], [-2.0], [0.5], [0.0]])
+        streams = [np.random.default_rng(k) for k in range(4)]
+        rows = np.concatenate([task.controls(values[k : k + 1], streams[k]) for k in range(4)])
+        again = [np.random.default_rng(k) for k in range(4)]
+        np.testing.assert_array_equal(task.controls_each(values, again), rows)
+        # Each stream is left where row-by-row drawing leaves it.
+        assert [r.random() for r in again] == [r.random() for r in streams]
+    with pytest.raises(ValueError, match="one random stream per row"):
+        task.controls_each(values, again[:2])
+
+
 def test_zero_noise_draws_nothing():
     task = bicycle.Task(cg_noise=0.0)
     rng = np.random.RandomState(4)

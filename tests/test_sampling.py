@@ -426,15 +426,21 @@ def evaluated_noise(monkeypatch, policy, n_episodes, seed, max_episode_steps):
     from tatl_mj.suite import bicycle
 
     rows = []
-    controls = bicycle.Task.controls
+    controls, controls_each = bicycle.Task.controls, bicycle.Task.controls_each
 
     def recorded(self, values, random):
         ctrl = controls(self, values, random)
         rows.append(ctrl[:, 1].copy())
         return ctrl
 
+    def recorded_each(self, values, randoms):
+        ctrl = controls_each(self, values, randoms)
+        rows.append(ctrl[:, 1].copy())
+        return ctrl
+
     with monkeypatch.context() as patch:
         patch.setattr(bicycle.Task, "controls", recorded)
+        patch.setattr(bicycle.Task, "controls_each", recorded_each)
         returns, lengths = sampling.evaluate(
             "bicycle", "balance", policy, n_episodes, seed, max_episode_steps=max_episode_steps
         )

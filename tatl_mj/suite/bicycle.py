@@ -60,7 +60,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import xml.etree.ElementTree as ET
-from typing import Any
+from typing import Any, Sequence
 
 import mujoco
 import numpy as np
@@ -423,6 +423,19 @@ class Task(common.StateTask):
         # on the transition, carried by ctrl alone, so the batched sampler and
         # mujoco.rollout replay episodes exactly.
         offset = random.uniform(-self.cg_noise, self.cg_noise, size=n) if self.cg_noise else np.zeros(n)
+        return control_vector(torque[:, 0], offset, self.speed)
+
+    def controls_each(self, action_values: np.ndarray, randoms: Sequence[Any]) -> np.ndarray:
+        """``controls`` of each row with its own random stream: row i is what
+        ``controls(action_values[i : i + 1], randoms[i])`` gives, drawing the same
+        numbers from ``randoms[i]``, for all rows in one call (evaluation episodes)."""
+        torque = np.asarray(action_values, np.float64).reshape(-1, 1)
+        if len(randoms) != len(torque):
+            raise ValueError(f"controls_each needs one random stream per row, got {len(randoms)} for {len(torque)}")
+        if not self.cg_noise:
+            return control_vector(torque[:, 0], np.zeros(len(torque)), self.speed)
+        c = self.cg_noise
+        offset = np.concatenate([r.uniform(-c, c, size=1) for r in randoms]) if len(torque) else np.zeros(0)
         return control_vector(torque[:, 0], offset, self.speed)
 
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -100,11 +100,15 @@ class Physics(common.StatePhysics):
     def states_from(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         # qpos = [slider, hinge], qvel likewise: the state interleaves them.
         qpos, qvel = np.asarray(qpos, np.float64), np.asarray(qvel, np.float64)
-        return np.concatenate((qpos, qvel), axis=1)[:, [0, 2, 1, 3]]
+        # Column copies, not a concatenation and a fancy index: a third of the time
+        # (a horizon controller's source queries call this ten times a decision).
+        out = np.empty((len(qpos), 4))
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = qpos[:, 0], qvel[:, 0], qpos[:, 1], qvel[:, 1]
+        return out
 
     def qpos_qvel_from(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = np.asarray(states, np.float64)
-        return s[:, [0, 2]].copy(), s[:, [1, 3]].copy()
+        return s[:, 0::2].copy(), s[:, 1::2].copy()
 
     def cart_position(self) -> float:
         """x (m)."""
