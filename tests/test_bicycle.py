@@ -464,3 +464,18 @@ def test_steer_into_the_fall_balances_for_a_minute(discrete):
     # Without the controller the same noisy bicycle falls within seconds.
     rolls, timestep = run(make_env(speed=2.778, cg_noise=0.02, random=5), lambda s: 0.0, 60.0)
     assert timestep.discount == 0.0 and len(rolls) < 1000
+
+
+def test_start_roll_sets_the_range_of_start_rolls_and_is_checked():
+    bike = bicycle
+
+    rolls = {}
+    for start_roll in (bike.START_ROLL, 0.15):
+        env = suite.load("bicycle", "balance", task_kwargs={"random": 0, "start_roll": start_roll})
+        rolls[start_roll] = np.array([env.reset().observation["state"][2] for _ in range(200)])
+    assert np.abs(rolls[bike.START_ROLL]).max() <= bike.START_ROLL
+    assert 0.12 < np.abs(rolls[0.15]).max() <= 0.15  # the wider range is used, and held to
+    default = suite.load("bicycle", "balance", task_kwargs={"random": 0}).reset().observation["state"]
+    assert default[2] == rolls[bike.START_ROLL][0]  # the default is unchanged
+    with pytest.raises(ValueError, match=r"start_roll must be in \[0, 0.2094\) rad"):
+        suite.load("bicycle", "balance", task_kwargs={"start_roll": 0.3})

@@ -45,7 +45,9 @@ Timing             control step 0.01 s; physics step 0.001 s (implicitfast),
                    so 10 physics steps per action.
 Parameters         ``speed`` (m/s, default 2.778 = 10 km/h, below the
                    benchmark's self-stable window 4.29..6.02 m/s),
-                   ``cg_noise`` (m, default 0.02), :class:`BicycleParams`:
+                   ``cg_noise`` (m, default 0.02), ``start_roll`` (rad,
+                   default 1 degree: the start roll's range, below the
+                   12 degree fall), :class:`BicycleParams`:
                    tyre_half_width 0.005 m, rider_mass 60 kg (of the rear
                    body's 85; the mass whose weight d displaces),
                    tyre_friction 1.2, gravity 9.81 m/s^2.
@@ -391,8 +393,18 @@ def control_vector(torque: Any, cg_offset: Any, speed: float) -> np.ndarray:
 class Task(common.StateTask):
     """Keep the bicycle within 12 degrees of upright at a constant forward speed."""
 
-    def __init__(self, speed: float = DEFAULT_SPEED, cg_noise: float = DEFAULT_CG_NOISE, random: Any = None):
+    def __init__(
+        self,
+        speed: float = DEFAULT_SPEED,
+        cg_noise: float = DEFAULT_CG_NOISE,
+        random: Any = None,
+        start_roll: float = START_ROLL,
+    ):
         speed, cg_noise = common.real(speed, "bicycle speed"), common.real(cg_noise, "bicycle cg_noise")
+        start_roll = common.real(start_roll, "bicycle start_roll")
+        if not (math.isfinite(start_roll) and 0.0 <= start_roll < ROLL_LIMIT):
+            raise ValueError(f"start_roll must be in [0, {ROLL_LIMIT:.4f}) rad (below the fall), got {start_roll!r}")
+        self.start_roll = start_roll
         if not (math.isfinite(speed) and 0.0 < speed <= 20.0):
             raise ValueError(f"speed must be in (0, 20] m/s, got {speed!r}")
         if not (math.isfinite(cg_noise) and 0.0 <= cg_noise <= MAX_CG_NOISE):
@@ -441,7 +453,7 @@ class Task(common.StateTask):
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
         physics.set_target_speed(self.speed)  # qpos_qvel_from reads it
         states = np.zeros((n, Physics.STATE_SIZE))
-        states[:, 2] = self.random.uniform(-START_ROLL, START_ROLL, size=n)
+        states[:, 2] = self.random.uniform(-self.start_roll, self.start_roll, size=n)
         return physics.qpos_qvel_from(states)
 
     def initialize_episode(self, physics: Physics) -> None:
@@ -462,9 +474,11 @@ def balance(
     speed: float = DEFAULT_SPEED,
     cg_noise: float = DEFAULT_CG_NOISE,
     params: BicycleParams | None = None,
+    start_roll: float = START_ROLL,
 ) -> common.Environment:
-    """Bicycle balance at ``speed`` m/s with rider noise up to ``cg_noise`` m."""
-    task = Task(speed=speed, cg_noise=cg_noise, random=random)
+    """Bicycle balance at ``speed`` m/s with rider noise up to ``cg_noise`` m, each episode
+    starting upright but for a roll uniform in +-``start_roll`` rad (default 1 degree)."""
+    task = Task(speed=speed, cg_noise=cg_noise, random=random, start_roll=start_roll)
     physics = common.compile_physics(Physics, *model_xml(params))
     physics.set_target_speed(task.speed)
     return common.Environment(
