@@ -68,3 +68,24 @@ def test_summary_reports_the_iqm_over_seeds_of_each_seeds_mean():
     result = experiment["methods"]["m"]["steadiness"]["roll_rms"]
     assert result["per_seed"] == pytest.approx([0.001, 0.011, 0.021, 0.031])
     assert result["value"] == pytest.approx(np.mean([0.011, 0.021]))  # the middle half of four seeds
+
+
+def test_steadiness_and_survival_use_the_compared_seeds_whose_records_carry_them():
+    experiment = {
+        "methods": {
+            "m": {
+                "seeds": [0, 1, 2],
+                "final_return": [1.0] * 3,
+                "curve": {"samples": [10], "mean_return": [[1.0]] * 3},
+                "final_steadiness": {"1": {"roll_rms": [0.02]}, "2": {"roll_rms": [0.04]}},  # seed 0's is older
+                "final_steps": {"1": [5, 10], "2": [10, 10]},
+            }
+        },
+        "source_seeds": [0, 1, 2],
+        "random_returns": [0.0] * 3,
+    }
+    summary._steadiness(experiment)
+    summary._survival(experiment, cap=10)
+    data = experiment["methods"]["m"]
+    assert data["steadiness_seeds"] == [1, 2] and data["steadiness"]["roll_rms"]["per_seed"] == [0.02, 0.04]
+    assert data["survival"]["seeds"] == [1, 2] and data["survival"]["at_cap"] == pytest.approx(0.75)

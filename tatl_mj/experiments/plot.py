@@ -220,7 +220,10 @@ def table(summary: dict) -> str:
             lines += [f"- {v}" for v in verdicts if v]
         survived = {m: d["survival"] for m, d in exp["methods"].items() if "survival" in d}
         if survived:
-            parts = [f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes)" for m, v in survived.items()]
+            parts = [
+                f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes, seeds {_seed_range(v.get('seeds'))})"
+                for m, v in survived.items()
+            ]
             lines += [
                 "",
                 "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
@@ -231,7 +234,10 @@ def table(summary: dict) -> str:
             lines += [f"- {_pair_sentence(p, against='its placebo')}" for p in exp["placebo"]]
         steady = {m: d["steadiness"] for m, d in exp["methods"].items() if "steadiness" in d}
         if steady:
-            lines += ["", _steadiness_sentence(steady)]
+            seeds = sorted(
+                {_seed_range(d.get("steadiness_seeds")) for d in exp["methods"].values() if "steadiness" in d}
+            )
+            lines += ["", _steadiness_sentence(steady) + f" Seeds: {'; '.join(seeds)}."]
         best = exp.get("best_baseline")
         if exp.get("vs_best_baseline"):
             lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
@@ -253,6 +259,15 @@ def table(summary: dict) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def _seed_range(seeds: Sequence[int] | None) -> str:
+    if not seeds:
+        return "?"
+    seeds = sorted(seeds)
+    if seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2:
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ", ".join(str(s) for s in seeds)
 
 
 def _steadiness_sentence(steady: dict) -> str:

@@ -434,13 +434,15 @@ def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float
 
 def _steadiness(experiment: dict) -> None:
     """Per method, each steadiness measure at the largest budget: per seed the mean over its
-    evaluation episodes, and the IQM over the compared seeds with its interval, in place.
-    Only where every compared seed's record carries it."""
-    seeds = list(compare(experiment).seeds)
+    evaluation episodes, and the IQM over the compared seeds whose records carry it, with
+    its interval, in place."""
     for data in experiment["methods"].values():
-        per_seed = [data.get("final_steadiness", {}).get(str(s)) for s in seeds]
-        if not seeds or any(v is None for v in per_seed):
+        # The compared seeds whose records carry it (older records may not: said in the table).
+        seeds = [s for s in compare(experiment).seeds if str(s) in data.get("final_steadiness", {})]
+        per_seed = [data["final_steadiness"][str(s)] for s in seeds]
+        if not seeds:
             continue
+        data["steadiness_seeds"] = seeds
         data["steadiness"] = {
             name: {**stats.iqm_interval([means]).as_dict(), "per_seed": means.tolist()}
             for name in per_seed[0]
@@ -453,12 +455,12 @@ def _survival(experiment: dict, cap: int | None) -> None:
     over the compared seeds and censored at the episode cap, where any episode ended early."""
     if cap is None:
         return
-    seeds = list(compare(experiment).seeds)
     for data in experiment["methods"].values():
-        steps = [data.get("final_steps", {}).get(str(s)) for s in seeds]
-        if not seeds or any(v is None for v in steps):
+        # The compared seeds whose records carry episode lengths (older records may not).
+        seeds = [s for s in compare(experiment).seeds if str(s) in data.get("final_steps", {})]
+        if not seeds:
             continue
-        lengths = np.concatenate([np.asarray(v, dtype=np.float64) for v in steps])
+        lengths = np.concatenate([np.asarray(data["final_steps"][str(s)], dtype=np.float64) for s in seeds])
         times, probability = stats.survival(lengths, cap)
         if len(times):
             data["survival"] = {
@@ -466,6 +468,7 @@ def _survival(experiment: dict, cap: int | None) -> None:
                 "probability": probability.tolist(),
                 "at_cap": float(probability[-1]),
                 "episodes": int(len(lengths)),
+                "seeds": seeds,
             }
 
 
