@@ -38,9 +38,7 @@ def _show(bound: float) -> str:
     return f"{bound:g}"
 
 
-def integer(
-    owner: str, field: str, value: Any, minimum: int = 1, maximum: int | None = None, unit: str = ""
-) -> int:
+def integer(owner: str, field: str, value: Any, minimum: int = 1, maximum: int | None = None, unit: str = "") -> int:
     """``value`` as an int, if it is an integer in ``minimum..maximum`` (None: no upper bound).
 
     ``unit`` is appended to the valid range in the message, e.g. ``" (target steps)"``.

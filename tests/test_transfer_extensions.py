@@ -55,7 +55,7 @@ def test_registered_ablations_fix_their_settings():
         (lambda: HorizonTATL(adaptive_actions=(1.0,)), "adaptive_actions is not supported"),
         (lambda: ReplanTATL(prior_scope="everywhere"), "ReplanTATL.prior_scope is 'everywhere'"),
         (lambda: ReplanTATL(data="oracle"), "ReplanTATL.data is 'oracle'"),
-        (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be in \[0, 1\)"),
+        (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be a finite number in \[0, 1\)"),
     ],
 )
 def test_extension_settings_are_checked(make, message):

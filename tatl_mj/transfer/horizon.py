@@ -213,10 +213,7 @@ class HorizonTATLPolicy:
                 )
             object.__setattr__(self, "target_actions", actions)
         zero = tuple(self.source_zero)
-        if zero and (
-            self.reference != "source"
-            or not all(is_integer(i) and i >= 0 for i in zero)
-        ):
+        if zero and (self.reference != "source" or not all(is_integer(i) and i >= 0 for i in zero)):
             raise ValueError(
                 f"source_zero must be source coordinate indices >= 0 with reference='source', got {zero!r}"
             )
