@@ -67,7 +67,7 @@ from dm_env import specs
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
-from tatl_mj.validation import integer
+from tatl_mj.validation import integer, is_integer
 
 LAYOUT: tuple[str, ...] = (
     "..........",
@@ -181,7 +181,7 @@ def transition_model(windy: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
 
 
 def _action_index(action: Any) -> int:
-    if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < len(ACTIONS):
+    if is_integer(action) and 0 <= action < len(ACTIONS):
         return int(action)  # the usual case, without the array checks below
     a = np.asarray(action)
     value = a.reshape(-1)[0] if a.size == 1 and np.issubdtype(a.dtype, np.number) else None
