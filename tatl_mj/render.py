@@ -53,6 +53,8 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from tatl_mj.validation import integer, number
+
 Policy = Callable[[np.ndarray], np.ndarray]
 SourceSpec = tuple[Any, Callable[[np.ndarray], np.ndarray]]
 
@@ -249,8 +251,7 @@ def write_clip(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps:
     extension = path.suffix.lower()
     if extension not in CLIP_EXTENSIONS:
         raise ValueError(f"path {str(path)!r}: clip extension must be one of {CLIP_EXTENSIONS}, got {extension!r}")
-    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be a positive number, got {fps!r}")
+    number("", "fps", fps, 0.0, low_open=True)
     checked = (_check_frame(i, frame) for i, frame in enumerate(frames))
     path.parent.mkdir(parents=True, exist_ok=True)
     if extension == ".gif":
@@ -367,8 +368,7 @@ def _font(size: int) -> Any:
 
 def _frame_count(seconds: float, fps: float) -> int:
     for name, value in (("seconds", seconds), ("fps", fps)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-            raise ValueError(f"{name} must be a positive number, got {value!r}")
+        number("", name, value, 0.0, low_open=True)
     n = int(round(seconds * fps))
     if n < 1:
         raise ValueError(f"seconds * fps = {seconds * fps:g} gives no frame; ask for at least 1")
@@ -376,8 +376,7 @@ def _frame_count(seconds: float, fps: float) -> int:
 
 
 def _check_size(name: str, value: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 16:
-        raise ValueError(f"{name} must be an integer >= 16 pixels, got {value!r}")
+    integer("", name, value, 16, unit=" pixels")
 
 
 def _check_frame(index: int, frame: np.ndarray) -> np.ndarray:

@@ -67,6 +67,7 @@ from dm_control.rl import control
 from tatl_mj import suite
 from tatl_mj.description import CellMap
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import integer, is_integer
 
 IndexPolicy = Callable[[np.ndarray], np.ndarray]
 """``policy(states (N, d)) -> (N,)`` indices into the domain's ``ACTIONS``."""
@@ -164,7 +165,7 @@ class _Simulator:
         ``RandomState(seed)`` is. A nested use (a policy that collects) gets a new one.
         """
         env, self._spare_env = self._spare_env, None
-        if env is None or isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        if env is None or not is_integer(seed):
             env = self.make_env(seed)
         else:
             env.task.random.seed(seed)
@@ -359,14 +360,13 @@ def _cached(domain: str, task: str, kwargs: tuple[tuple[str, Any], ...], n_threa
 
 
 def _simulator(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int) -> _Simulator:
-    if isinstance(n_threads, bool) or not isinstance(n_threads, (int, np.integer)) or n_threads < 1:
-        raise ValueError(f"n_threads must be an integer >= 1, got {n_threads!r}")
+    n_threads = integer("", "n_threads", n_threads, 1)
     key = _kwargs_key(task_kwargs)
     try:
         hash(key)
     except TypeError:  # unhashable task kwargs: build without caching
-        return _Simulator(domain, task, key, int(n_threads))
-    return _cached(domain, task, key, int(n_threads))
+        return _Simulator(domain, task, key, n_threads)
+    return _cached(domain, task, key, n_threads)
 
 
 def is_batched(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> bool:
@@ -375,12 +375,6 @@ def is_batched(domain: str, task: str, task_kwargs: dict[str, Any] | None = None
 
 
 # --- Argument checks -----------------------------------------------------------
-
-
-def _check_count(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 def _check_indices(indices: Any, n: int, n_actions: int) -> np.ndarray:
@@ -531,10 +525,10 @@ def collect(
     1.5x10^4 transitions: 13% of stepped substeps idle cold, 8% warm).
     Neither changes the data.
     """
-    n = _check_count("n_transitions", n_transitions, 1)
-    n_parallel = _parallel(n, policy) if n_parallel is None else _check_count("n_parallel", n_parallel, 1)
+    n = integer("", "n_transitions", n_transitions, 1)
+    n_parallel = _parallel(n, policy) if n_parallel is None else integer("", "n_parallel", n_parallel, 1)
     if max_episode_steps is not None:
-        _check_count("max_episode_steps", max_episode_steps, 1)
+        integer("", "max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
     if sim.table is not None:
         return _collect_table(sim, n, seed, policy, max_episode_steps)
@@ -1051,9 +1045,9 @@ def evaluate(
     methods evaluated with one seed see common random numbers. Controls without
     noise draw nothing (``random=None``), one call for all live episodes.
     """
-    n_episodes = _check_count("n_episodes", n_episodes, 1)
+    n_episodes = integer("", "n_episodes", n_episodes, 1)
     if max_episode_steps is not None:
-        _check_count("max_episode_steps", max_episode_steps, 1)
+        integer("", "max_episode_steps", max_episode_steps, 1)
     sim = _simulator(domain, task, task_kwargs, n_threads)
     if sim.table is not None:
         return _evaluate_table(sim, policy, n_episodes, seed, max_episode_steps)
@@ -1183,9 +1177,9 @@ def policy_transitions(
     own end or after ``max_episode_steps``; the last one is cut at ``n``.
     ``absorbing`` marks ends with discount 0 and ``last`` each episode's final transition.
     """
-    n = _check_count("n", n, 1)
+    n = integer("", "n", n, 1)
     if max_episode_steps is not None:
-        _check_count("max_episode_steps", max_episode_steps, 1)
+        integer("", "max_episode_steps", max_episode_steps, 1)
     rows: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "next_states", "absorbing", "last")}
     while len(rows["states"]) < n:
         timestep = env.reset()
@@ -1219,7 +1213,7 @@ def start_states(
     So a model can be scored from exactly the states a real rollout starts from
     (Algorithm 2 compares U_M and U_Mhat from the same starts).
     """
-    n = _check_count("n_episodes", n_episodes, 1)
+    n = integer("", "n_episodes", n_episodes, 1)
     sim = _simulator(domain, task, task_kwargs, 1)
     if not sim.fast:
         envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n)]

@@ -291,7 +291,7 @@ def test_bad_arguments_raise_value_errors():
         render.render_episode(env, _lqr_like, seconds=0.1, camera="nope")
     with pytest.raises(ValueError, match=r"on_end must be one of \('reset', 'stop'\)"):
         render.render_episode(env, _lqr_like, seconds=0.1, on_end="freeze")
-    with pytest.raises(ValueError, match="seconds must be a positive number"):
+    with pytest.raises(ValueError, match="seconds must be a finite number > 0, got 0"):
         render.render_episode(env, _lqr_like, seconds=0)
     with pytest.raises(ValueError, match="width must be an integer"):
         render.render_episode(env, _lqr_like, seconds=0.1, width=640.5)
@@ -315,7 +315,7 @@ def test_write_clip_round_trips_and_rejects_bad_input(tmp_path):
         render.write_clip(frames, tmp_path / "clip.avi", fps=7)
     with pytest.raises(ValueError, match=r"frames\[0\] must be an \(H, W, 3\) uint8"):
         render.write_clip(frames.astype(np.float32), tmp_path / "f.mp4", fps=7)
-    with pytest.raises(ValueError, match="fps must be a positive number"):
+    with pytest.raises(ValueError, match="fps must be a finite number > 0, got 0"):
         render.write_clip(frames, tmp_path / "g.mp4", fps=0)
 
 

@@ -132,7 +132,11 @@ def test_variant_specs_load(path):
         ),
         (lambda t: t["methods"]["ta-tl"].__setitem__("zeeta", 0.1), "methods.ta-tl", "valid settings"),
         (lambda t: t["methods"].__setitem__("ta-tll", {}), "methods.ta-tll", "valid methods"),
-        (lambda t: t["methods"]["ta-tl"].__setitem__("zeta", -0.5), "methods.ta-tl", "TATL.zeta must be in"),
+        (
+            lambda t: t["methods"]["ta-tl"].__setitem__("zeta", -0.5),
+            "methods.ta-tl",
+            "TATL.zeta must be a finite number > 0",
+        ),
         (lambda t: t.__setitem__("name", "../../escape"), "name", "it names a folder"),
         (lambda t: t["target"].__setitem__("task_kwargs", {"wind": 1}), "target.task_kwargs", "valid"),
         (lambda t: t["source_learning"].__setitem__("method", "q_iteration"), "source_learning.method", "known model"),

@@ -51,11 +51,11 @@ def test_registered_ablations_fix_their_settings():
         ),
         (lambda: HorizonTATL(model="simulator"), "HorizonTATL.model is 'simulator'"),
         (lambda: HorizonTATL(weights=(0.0, 0.0)), "HorizonTATL.weights must be numbers >= 0, not all 0"),
-        (lambda: HorizonTATL(step_ratio=-2.0), "HorizonTATL.step_ratio must be a number > 0"),
+        (lambda: HorizonTATL(step_ratio=-2.0), "HorizonTATL.step_ratio must be a finite number > 0"),
         (lambda: HorizonTATL(adaptive_actions=(1.0,)), "adaptive_actions is not supported"),
         (lambda: ReplanTATL(prior_scope="everywhere"), "ReplanTATL.prior_scope is 'everywhere'"),
         (lambda: ReplanTATL(data="oracle"), "ReplanTATL.data is 'oracle'"),
-        (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be in \[0, 1\)"),
+        (lambda: ReplanTATL(gamma=1.0), r"ReplanTATL.gamma must be a finite number in \[0, 1\)"),
     ],
 )
 def test_extension_settings_are_checked(make, message):

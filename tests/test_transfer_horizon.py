@@ -250,10 +250,10 @@ def test_zero_reference_regulates_an_unstable_system():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(reference="upright"), r"reference must be one of \('source', 'zero'\)"),
-        (dict(horizon=0), "horizon must be a positive integer"),
-        (dict(horizon=2.5), "horizon must be a positive integer"),
-        (dict(step_ratio=-2.0), "step_ratio must be a finite number > 0"),
+        (dict(reference="upright"), r"HorizonTATLPolicy.reference is 'upright'; valid choices: \['source', 'zero'\]"),
+        (dict(horizon=0), "HorizonTATLPolicy.horizon must be an integer >= 1"),
+        (dict(horizon=2.5), "HorizonTATLPolicy.horizon must be an integer >= 1"),
+        (dict(step_ratio=-2.0), "HorizonTATLPolicy.step_ratio must be a finite number > 0"),
         (dict(weights=np.zeros(2)), "weights must be"),
         (dict(weights=np.array([1.0, -1.0])), "weights must be"),
         (dict(target_low=[1.0], target_high=[-1.0]), "target_low must be <= target_high"),

@@ -18,13 +18,14 @@ class built with the table's other settings (:func:`build_method`).
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 import tomllib
 import types
 import typing
 from pathlib import Path
 from typing import Any
+
+from tatl_mj.validation import is_integer, is_number
 
 SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
@@ -200,11 +201,11 @@ def _convert(value: Any, hint: Any, path: str, key: str) -> Any:
     if dataclasses.is_dataclass(hint):
         return _build(hint, value, path, key)
     if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not is_number(value):
             _fail(path, key, "a finite number", value)
         return float(value)
     if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        if not is_integer(value):
             _fail(path, key, "an integer", value)
         return value
     if hint is str:

@@ -67,6 +67,7 @@ from dm_env import specs
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
+from tatl_mj.validation import integer, is_integer
 
 LAYOUT: tuple[str, ...] = (
     "..........",
@@ -180,7 +181,7 @@ def transition_model(windy: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
 
 
 def _action_index(action: Any) -> int:
-    if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < len(ACTIONS):
+    if is_integer(action) and 0 <= action < len(ACTIONS):
         return int(action)  # the usual case, without the array checks below
     a = np.asarray(action)
     value = a.reshape(-1)[0] if a.size == 1 and np.issubdtype(a.dtype, np.number) else None
@@ -202,8 +203,7 @@ class GridWorld(dm_env.Environment):
         random_start: bool = False,
         stochastic_wind: bool = False,
     ) -> None:
-        if isinstance(time_limit, bool) or not isinstance(time_limit, (int, np.integer)) or time_limit < 1:
-            raise ValueError(f"gridworld time_limit must be a whole number of steps >= 1, got {time_limit!r}")
+        integer("gridworld", "time_limit", time_limit, 1, unit=" (steps)")
         for name, flag in (("random_start", random_start), ("stochastic_wind", stochastic_wind)):
             if not isinstance(flag, (bool, np.bool_)):
                 raise ValueError(f"gridworld {name} must be true or false, got {flag!r}")

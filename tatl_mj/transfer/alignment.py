@@ -49,6 +49,7 @@ from sklearn import neighbors
 
 from tatl_mj.transfer.features import as_states, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import integer, number
 
 
 @runtime_checkable
@@ -253,16 +254,13 @@ def align_manifolds(
     """
     xs = as_states(source_states, "source_states")
     xt = as_states(target_states, "target_states")
-    if isinstance(n_neighbors, bool) or not isinstance(n_neighbors, (int, np.integer)) or n_neighbors < 2:
-        raise ValueError(f"n_neighbors must be an integer >= 2, got {n_neighbors!r}")
-    if isinstance(n_matches, bool) or not isinstance(n_matches, (int, np.integer)) or n_matches < 1:
-        raise ValueError(f"n_matches must be an integer >= 1, got {n_matches!r}")
+    integer("", "n_neighbors", n_neighbors, 2)
+    integer("", "n_matches", n_matches, 1)
     if not (np.isfinite(mu) and mu > 0):
         raise ValueError(f"mu must be a finite number > 0, got {mu!r}")
     d_s, d_t = xs.shape[1], xt.shape[1]
     dim = min(d_s, d_t) if dim is None else dim
-    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or not 1 <= dim <= min(d_s, d_t):
-        raise ValueError(f"dim must be an integer in 1..{min(d_s, d_t)} (min of the state dims), got {dim!r}")
+    integer("", "dim", dim, 1, min(d_s, d_t), unit=" (min of the state dims)")
     least = max(n_neighbors + 2, n_matches + 1, d_s + d_t + 1)
     for name, x in (("source_states", xs), ("target_states", xt)):
         if len(x) < least:
@@ -376,12 +374,6 @@ def dynamics_consistency(
     return _consistency(mapping, target, source_step, scale, rate, source_mask, target_mask)[0]
 
 
-def _positive_int(value: Any, least: int, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
-    return int(value)
-
-
 @dataclasses.dataclass(frozen=True)
 class TransitionAlignment:
     """Settings of :func:`align_transitions` (``mapping.kind = "transition_alignment"``).
@@ -404,11 +396,9 @@ class TransitionAlignment:
     sign_flips: bool = True
 
     def __post_init__(self) -> None:
-        _positive_int(self.n_neighbors, 2, "TransitionAlignment.n_neighbors")
-        _positive_int(self.max_samples, 10, "TransitionAlignment.max_samples")
-        mu_ok = not isinstance(self.mu, bool) and isinstance(self.mu, (int, float)) and np.isfinite(self.mu)
-        if not (mu_ok and self.mu > 0):
-            raise ValueError(f"TransitionAlignment.mu must be a finite number > 0, got {self.mu!r}")
+        integer("TransitionAlignment", "n_neighbors", self.n_neighbors, 2)
+        integer("TransitionAlignment", "max_samples", self.max_samples, 10)
+        number("TransitionAlignment", "mu", self.mu, 0.0, low_open=True)
         rates = np.asarray(self.rates, dtype=np.float64).ravel() if np.ndim(self.rates) in (0, 1) else None
         if rates is None or len(rates) == 0 or not np.all(np.isfinite(rates) & (rates > 0)):
             raise ValueError(f"TransitionAlignment.rates must be a non-empty list of numbers > 0, got {self.rates!r}")
@@ -525,8 +515,8 @@ def _checked_pair(
     for name, value in (("source", source), ("target", target)):
         if not isinstance(value, Transitions):
             raise ValueError(f"{name} must be a Transitions batch, got {type(value).__name__}")
-    n_s = _positive_int(n_source_actions, 2, "n_source_actions")
-    n_t = _positive_int(n_target_actions, 2, "n_target_actions")
+    n_s = integer("", "n_source_actions", n_source_actions, 2)
+    n_t = integer("", "n_target_actions", n_target_actions, 2)
     if n_s != n_t:
         raise ValueError(
             "n_source_actions and n_target_actions must be the same number of actions "

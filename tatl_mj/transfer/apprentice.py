@@ -39,6 +39,7 @@ from tatl_mj.transfer.features import (
     wrap_angle,
 )
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import integer
 
 
 def _as_actions(action_values: np.ndarray, n: int, name: str = "action_values") -> np.ndarray:
@@ -220,8 +221,7 @@ def learn_apprentice(
         raise ValueError(f"action_set must be a finite (n_actions, m) array, got shape {np.shape(action_set)}")
     if len(transitions) and (transitions.actions.min() < 0 or transitions.actions.max() >= len(actions)):
         raise ValueError(f"transitions.actions must index action_set (0..{len(actions) - 1})")
-    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
-        raise ValueError(f"batch must be a positive integer, got {batch!r}")
+    integer("", "batch", batch, 1)
     if not (math.isfinite(zeta) and zeta >= 0):
         raise ValueError(f"zeta must be a finite number >= 0, got {zeta!r}")
     total = len(transitions)

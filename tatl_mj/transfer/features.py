@@ -28,6 +28,8 @@ from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
+from tatl_mj.validation import integer
+
 TWO_PI = 2.0 * np.pi
 
 
@@ -287,9 +289,7 @@ class OneHot:
 
     def __post_init__(self) -> None:
         for name in ("n_rows", "n_cols"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"OneHot.{name} must be a positive integer, got {value!r}")
+            integer("OneHot", name, getattr(self, name), 1)
 
     def size(self, state_dim: int) -> int:
         return self.n_rows * self.n_cols

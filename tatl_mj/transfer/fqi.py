@@ -38,6 +38,7 @@ from sklearn import ensemble
 
 from tatl_mj.transfer.features import Features, as_states, make_features
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import integer
 
 
 @runtime_checkable
@@ -95,9 +96,7 @@ class ExtraTreesRegressor:
 
     def __post_init__(self) -> None:
         for name, least in (("n_estimators", 1), ("min_samples_split", 2), ("min_samples_leaf", 1)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-                raise ValueError(f"ExtraTreesRegressor.{name} must be an integer >= {least}, got {value!r}")
+            integer("ExtraTreesRegressor", name, getattr(self, name), least)
 
 
 Regressor = LinearRegressor | ExtraTreesRegressor
@@ -216,12 +215,10 @@ def _check_fqi_inputs(
         raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
     if len(transitions) == 0:
         raise ValueError("transitions is empty; FQI needs at least one transition per action")
-    if isinstance(n_actions, bool) or not isinstance(n_actions, (int, np.integer)) or n_actions < 1:
-        raise ValueError(f"n_actions must be a positive integer, got {n_actions!r}")
+    integer("", "n_actions", n_actions, 1)
     if not (isinstance(gamma, (int, float)) and 0.0 <= gamma < 1.0):
         raise ValueError(f"gamma must be in [0, 1), got {gamma!r}")
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
-        raise ValueError(f"iterations must be a positive integer, got {iterations!r}")
+    integer("", "iterations", iterations, 1)
     a = transitions.actions
     if a.min() < 0 or a.max() >= n_actions:
         raise ValueError(f"transitions.actions must be indices in 0..{n_actions - 1}, got range {a.min()}..{a.max()}")

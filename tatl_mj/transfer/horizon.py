@@ -73,6 +73,7 @@ from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.method import TATL, TransferProblem
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import choice, integer, is_integer, number
 
 TargetModel = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """One batched target step: (N, dT) states, (N, mT) action values -> (N, dT) next states."""
@@ -182,16 +183,10 @@ class HorizonTATLPolicy:
         m = low.size
         object.__setattr__(self, "target_low", low)
         object.__setattr__(self, "target_high", high)
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
-            raise ValueError(f"horizon must be a positive integer (target steps), got {self.horizon!r}")
-        ratio = self.step_ratio
-        if (
-            isinstance(ratio, bool)
-            or not isinstance(ratio, (int, float, np.number))
-            or not (math.isfinite(ratio) and ratio > 0)
-        ):
-            raise ValueError(f"step_ratio must be a finite number > 0 (dt_source / dt_target), got {ratio!r}")
-        object.__setattr__(self, "step_ratio", float(ratio))
+        owner = type(self).__name__
+        integer(owner, "horizon", self.horizon, 1, unit=" (target steps)")
+        ratio = number(owner, "step_ratio", self.step_ratio, 0.0, low_open=True, unit=" (dt_source / dt_target)")
+        object.__setattr__(self, "step_ratio", ratio)
         if self.weights is not None:
             w = np.asarray(self.weights, dtype=np.float64)
             if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
@@ -199,8 +194,7 @@ class HorizonTATLPolicy:
                     f"weights must be a (d,) vector of finite numbers >= 0, not all 0, got {self.weights!r}"
                 )
             object.__setattr__(self, "weights", w)
-        if self.reference not in REFERENCES:
-            raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
+        choice(owner, "reference", self.reference, REFERENCES)
         if self.reference == "source":
             missing = [n for n in ("source_q", "mapping", "source_step", "target_actions") if getattr(self, n) is None]
             if missing:
@@ -219,10 +213,7 @@ class HorizonTATLPolicy:
                 )
             object.__setattr__(self, "target_actions", actions)
         zero = tuple(self.source_zero)
-        if zero and (
-            self.reference != "source"
-            or not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0 for i in zero)
-        ):
+        if zero and (self.reference != "source" or not all(is_integer(i) and i >= 0 for i in zero)):
             raise ValueError(
                 f"source_zero must be source coordinate indices >= 0 with reference='source', got {zero!r}"
             )
@@ -454,23 +445,14 @@ class HorizonTATL(TATL):
         owner = type(self).__name__
         if self.adaptive_actions:
             raise ValueError(f"{owner}.adaptive_actions is not supported (the action is clipped to the actuator)")
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
-            raise ValueError(f"{owner}.horizon must be an integer >= 1 (target steps), got {self.horizon!r}")
-        if self.step_ratio is not None and (
-            isinstance(self.step_ratio, bool)
-            or not isinstance(self.step_ratio, (int, float))
-            or not (math.isfinite(self.step_ratio) and self.step_ratio > 0)
-        ):
-            raise ValueError(
-                f"{owner}.step_ratio must be a number > 0 (dt_source / dt_target), got {self.step_ratio!r}"
-            )
+        integer(owner, "horizon", self.horizon, 1, unit=" (target steps)")
+        if self.step_ratio is not None:
+            number(owner, "step_ratio", self.step_ratio, 0.0, low_open=True, unit=" (dt_source / dt_target)")
         w = np.asarray(self.weights, dtype=np.float64) if self.weights else None
         if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0)):
             raise ValueError(f"{owner}.weights must be numbers >= 0, not all 0, got {self.weights!r}")
-        if self.reference not in REFERENCES:
-            raise ValueError(f"{owner}.reference is {self.reference!r}; valid choices: {list(REFERENCES)}")
-        if self.model not in self.MODELS:
-            raise ValueError(f"{owner}.model is {self.model!r}; valid choices: {list(self.MODELS)}")
+        choice(owner, "reference", self.reference, REFERENCES)
+        choice(owner, "model", self.model, self.MODELS)
         if not isinstance(self.source_zero, tuple) or not all(isinstance(n, str) for n in self.source_zero):
             raise ValueError(f"{owner}.source_zero must be source state names, got {self.source_zero!r}")
         for field, used in (("source_zero", bool(self.source_zero)), ("source = 'placebo'", self.source == "placebo")):

@@ -34,6 +34,7 @@ from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration,
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, SourceStep, TATLPolicy
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import choice, integer, number
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Batched target policy: (N, dT) states -> (N, mT) action values, or (N,) indices for a discrete target."""
@@ -169,30 +170,6 @@ class TransferMethod(Protocol):
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy: ...
 
 
-def _check_choice(owner: str, field: str, value: Any, valid: tuple) -> None:
-    if value not in valid:
-        raise ValueError(f"{owner}.{field} is {value!r}; valid choices: {list(valid)}")
-
-
-def _check_number(
-    owner: str,
-    field: str,
-    value: Any,
-    low: float,
-    high: float = math.inf,
-    low_open: bool = False,
-    high_open: bool = False,
-    integer: bool = False,
-) -> None:
-    kind = "an integer" if integer else "a number"
-    ok_type = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
-    if isinstance(value, bool) or not ok_type or not math.isfinite(value):
-        raise ValueError(f"{owner}.{field} must be {kind}, got {value!r}")
-    if value < low or (low_open and value == low) or value > high or (high_open and value == high):
-        interval = f"{'(' if low_open else '['}{low}, {high}{')' if high_open else ']'}"
-        raise ValueError(f"{owner}.{field} must be in {interval}, got {value!r}")
-
-
 def check_features(owner: str, field: str, spec: Any, state_dim: int | None = None) -> None:
     """A basis spec's keys and kind are valid (and, given ``state_dim``, its sizes)."""
     try:
@@ -269,16 +246,16 @@ class TATL:
     def __post_init__(self) -> None:
         owner = type(self).__name__
         check_features(owner, "apprentice", self.apprentice)
-        _check_choice(owner, "gap", self.gap, self.GAPS)
-        _check_choice(owner, "actions", self.actions, self.ACTION_SETS)
-        _check_choice(owner, "source", self.source, SOURCES)
-        _check_number(owner, "ridge", self.ridge, 0.0)
+        choice(owner, "gap", self.gap, self.GAPS)
+        choice(owner, "actions", self.actions, self.ACTION_SETS)
+        choice(owner, "source", self.source, SOURCES)
+        number(owner, "ridge", self.ridge, 0.0)
         if self.zeta is not None:
-            _check_number(owner, "zeta", self.zeta, 0.0, low_open=True)
+            number(owner, "zeta", self.zeta, 0.0, low_open=True)
         if self.batch is not None:
-            _check_number(owner, "batch", self.batch, 1, integer=True)
+            integer(owner, "batch", self.batch, 1)
         for i, value in enumerate(self.adaptive_actions):
-            _check_number(owner, f"adaptive_actions[{i}]", value, -math.inf)
+            number(owner, f"adaptive_actions[{i}]", value)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         """Settings that need the tasks' descriptions (basis size, actuator)."""
@@ -397,24 +374,24 @@ class TargetFQI:
 
     def __post_init__(self) -> None:
         owner = type(self).__name__
-        _check_choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
+        choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
         for field in ("ridge", "features"):
             if getattr(self, field) is not None and self.regressor != "linear":
                 raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
         if self.n_estimators is not None:
             if self.regressor != "extra_trees":
                 raise ValueError(f"{owner}.n_estimators applies to regressor 'extra_trees' only")
-            _check_number(owner, "n_estimators", self.n_estimators, 1, integer=True)
+            integer(owner, "n_estimators", self.n_estimators, 1)
         if self.ridge is not None:
-            _check_number(owner, "ridge", self.ridge, 0.0)
+            number(owner, "ridge", self.ridge, 0.0)
         if self.regressor == "linear":
             check_features(owner, "features", self.linear_features)
-        _check_number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
-        _check_number(owner, "iterations", self.iterations, 1, integer=True)
-        _check_choice(owner, "data", self.data, DATA_PROTOCOLS)
-        _check_number(owner, "epsilon", self.epsilon, 0.0, 1.0)
-        _check_number(owner, "online_batch", self.online_batch, 1, integer=True)
-        _check_choice(owner, "source", self.source, SOURCES)
+        number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
+        integer(owner, "iterations", self.iterations, 1)
+        choice(owner, "data", self.data, DATA_PROTOCOLS)
+        number(owner, "epsilon", self.epsilon, 0.0, 1.0)
+        integer(owner, "online_batch", self.online_batch, 1)
+        choice(owner, "source", self.source, SOURCES)
         if self.source == "placebo" and self.source_use == "none":
             raise ValueError(f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none")
 

@@ -20,8 +20,9 @@ import numpy as np
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.method import TATL, TargetFQI, TransferProblem, _check_number, check_features
+from tatl_mj.transfer.method import TATL, TargetFQI, TransferProblem, check_features
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import integer, number
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,8 +45,8 @@ class ApprenticeFQI(TargetFQI):
         super().__post_init__()
         owner = type(self).__name__
         check_features(owner, "apprentice", self.apprentice)
-        _check_number(owner, "apprentice_ridge", self.apprentice_ridge, 0.0)
-        _check_number(owner, "model_samples", self.model_samples, 1, integer=True)
+        number(owner, "apprentice_ridge", self.apprentice_ridge, 0.0)
+        integer(owner, "model_samples", self.model_samples, 1)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)

@@ -61,6 +61,7 @@ from tatl_mj.transfer.fqi import QFunction, TabularQ, q_iteration
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import choice, integer, number
 
 PRIOR_SCOPES = ("agreeing-cells", "unvisited")
 """Where a :class:`TabularApprentice` uses its fallback for unvisited pairs."""
@@ -123,8 +124,7 @@ def uninformed_model(n_cells: int, n_actions: int) -> TabularModel:
     and never invents one through unseen pairs.
     """
     for name, value in (("n_cells", n_cells), ("n_actions", n_actions)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        integer("", name, value, 1)
     stay = np.repeat(np.arange(n_cells, dtype=np.int64)[:, None], n_actions, axis=1)
     return TabularModel(stay, np.zeros((n_cells, n_actions)), np.zeros((n_cells, n_actions), dtype=bool))
 
@@ -436,14 +436,11 @@ class ReplanTATL:
 
     def __post_init__(self) -> None:
         owner = type(self).__name__
-        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 <= self.gamma < 1:
-            raise ValueError(f"{owner}.gamma must be in [0, 1), got {self.gamma!r}")
+        number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
         if not isinstance(self.source_prior, bool):
             raise ValueError(f"{owner}.source_prior must be true or false, got {self.source_prior!r}")
-        if self.prior_scope not in PRIOR_SCOPES:
-            raise ValueError(f"{owner}.prior_scope is {self.prior_scope!r}; valid choices: {list(PRIOR_SCOPES)}")
-        if self.data not in self.DATA:
-            raise ValueError(f"{owner}.data is {self.data!r}; valid choices: {list(self.DATA)}")
+        choice(owner, "prior_scope", self.prior_scope, PRIOR_SCOPES)
+        choice(owner, "data", self.data, self.DATA)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         owner = type(self).__name__
