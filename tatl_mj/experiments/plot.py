@@ -516,13 +516,24 @@ def _iqm_panel(ax: Any, experiment: dict, order: list[str], colors: dict[str, st
     ax.set_ylim(*limits)
     ax.set_xscale("log")
     ticks = spaced_ticks(sorted({float(v) for _, x, *_ in lines for v in x}), 0.2)
-    ax.set_xticks(ticks, [compact(b) for b in ticks])
-    ax.minorticks_off()
-    ax.set_xlabel("target transitions counted (median over seeds)")
-    ax.set_ylabel(NORMALISED_LABEL)
-    ax.set_title("(a) IQM of the normalised score over seeds, 95% band", fontsize=10)
-    ax.grid(alpha=0.25)
+    _label_curve_axes(
+        ax,
+        ticks,
+        "target transitions counted (median over seeds)",
+        NORMALISED_LABEL,
+        "(a) IQM of the normalised score over seeds, 95% band",
+    )
     return handles
+
+
+def _label_curve_axes(ax: Any, x_ticks: list[float], xlabel: str, ylabel: str, title: str) -> None:
+    """Panel (a)'s log-axis ticks (only those given), labels, title and grid."""
+    ax.set_xticks(x_ticks, [compact(b) for b in x_ticks])
+    ax.minorticks_off()
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.25)
 
 
 def _improvement_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> None:
@@ -698,12 +709,13 @@ def _curve_panel(
     budgets = sorted({float(b) for counts, _ in curves.values() for b in np.median(counts, axis=0)})
     span = math.log10(max(budgets) / min(budgets)) if budgets else 0.0
     x_ticks = spaced_ticks(budgets, max(0.12, span / 9))
-    ax.set_xticks(x_ticks, [compact(b) for b in x_ticks])
-    ax.minorticks_off()
-    ax.set_xlabel("target transitions counted (samples, Algorithm 2's rollouts, own data)")
-    ax.set_ylabel(RETURN_LABEL)
-    ax.set_title("(a) return (mean over evaluation episodes)", fontsize=10)
-    ax.grid(alpha=0.25)
+    _label_curve_axes(
+        ax,
+        x_ticks,
+        "target transitions counted (samples, Algorithm 2's rollouts, own data)",
+        RETURN_LABEL,
+        "(a) return (mean over evaluation episodes)",
+    )
     return handles, clipped_values
 
 
