@@ -36,6 +36,7 @@ import platform
 import resource
 import time
 import tracemalloc
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -387,54 +388,8 @@ def run(args: argparse.Namespace) -> int:
             f"machine: {info['cpu']}, {info['cores']} cores ({info['usable_cores']} usable), "
             f"load {info['load_average_1min']}, mujoco {info['mujoco']}, threads {args.threads}"
         )
-    from tatl_mj import suite
-
     physics = _physics_tasks()
-    per_domain: dict[str, dict[str, float]] = {}
-    for domain in domains:
-        task = physics[domain]
-        timers: dict[str, Any] = {
-            "dm_control": functools.partial(time_dm_control, domain, task, args.seconds / 2),
-            "dm_control_floor": functools.partial(time_dm_control_floor, domain, task, args.seconds / 2),
-            "sampler": functools.partial(time_sampler, domain, task, args.seconds, args.threads),
-            "rollout": functools.partial(time_rollout, domain, task, args.seconds / 2, args.threads),
-        }
-        peer_id = suite.describe(domain, task).gymnasium_peer
-        if peer_id is not None:
-            peer = time_gymnasium(peer_id, 0.0)  # 100 steps: is it there at all?
-            if "skipped" in peer:
-                emit({"kind": "gymnasium", "domain": domain, **peer})
-            else:
-                timers["gymnasium"] = functools.partial(time_gymnasium, peer_id, args.seconds / 2)
-        figures = _fastest_of(timers, args.repeats)
-        for path, record in figures.items():
-            emit({"kind": "steps", "domain": domain, "task": task, "path": path, **record})
-        per_domain[domain] = {f"{p}_steps_per_s": r["steps_per_s"] for p, r in figures.items()}
-        per_domain[domain]["sampler_vs_dm_control"] = (
-            figures["sampler"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
-        )
-        per_domain[domain]["sampler_vs_rollout"] = figures["sampler"]["steps_per_s"] / figures["rollout"]["steps_per_s"]
-        # Each repeat's sampler against the rollout timed right after it: the machine's
-        # drift between repeats cancels; the median of those pairs.
-        per_domain[domain]["sampler_vs_rollout_paired"] = float(
-            np.median(np.divide(figures["sampler"]["each_steps_per_s"], figures["rollout"]["each_steps_per_s"]))
-        )
-        # The most any sampler of the same physics could gain over the loop here.
-        per_domain[domain]["rollout_vs_dm_control"] = (
-            figures["rollout"]["steps_per_s"] / figures["dm_control"]["steps_per_s"]
-        )
-        # What the task's own logic leaves of dm_control's loop over this physics.
-        per_domain[domain]["dm_control_vs_floor"] = (
-            figures["dm_control"]["steps_per_s"] / figures["dm_control_floor"]["steps_per_s"]
-        )
-        if "gymnasium" in figures:
-            per_domain[domain]["sampler_vs_gymnasium"] = (
-                figures["sampler"]["steps_per_s"] / figures["gymnasium"]["steps_per_s"]
-            )
-            # The most any MuJoCo sampler of this physics could reach against Gymnasium.
-            per_domain[domain]["rollout_vs_gymnasium"] = (
-                figures["rollout"]["steps_per_s"] / figures["gymnasium"]["steps_per_s"]
-            )
+    per_domain = {domain: _time_domain(domain, physics[domain], args, emit) for domain in domains}
     extra: dict[str, Any] = {}
     # Memory first, so that the process's peak RSS is not FQI's or the renderer's.
     if args.memory_transitions:
@@ -455,6 +410,52 @@ def run(args: argparse.Namespace) -> int:
     summary["memory_peak_mb"] = extra.get("memory", {}).get("peak_mb")
     emit(summary)
     return 0
+
+
+def _time_domain(domain: str, task: str, args: argparse.Namespace, emit: Callable[[dict], None]) -> dict[str, float]:
+    """Times every stepping path of one domain's task (emitting each figure); returns its rates and ratios."""
+    from tatl_mj import suite
+
+    timers: dict[str, Any] = {
+        "dm_control": functools.partial(time_dm_control, domain, task, args.seconds / 2),
+        "dm_control_floor": functools.partial(time_dm_control_floor, domain, task, args.seconds / 2),
+        "sampler": functools.partial(time_sampler, domain, task, args.seconds, args.threads),
+        "rollout": functools.partial(time_rollout, domain, task, args.seconds / 2, args.threads),
+    }
+    peer_id = suite.describe(domain, task).gymnasium_peer
+    if peer_id is not None:
+        peer = time_gymnasium(peer_id, 0.0)  # 100 steps: is it there at all?
+        if "skipped" in peer:
+            emit({"kind": "gymnasium", "domain": domain, **peer})
+        else:
+            timers["gymnasium"] = functools.partial(time_gymnasium, peer_id, args.seconds / 2)
+    figures = _fastest_of(timers, args.repeats)
+    for path, record in figures.items():
+        emit({"kind": "steps", "domain": domain, "task": task, "path": path, **record})
+    return {f"{p}_steps_per_s": r["steps_per_s"] for p, r in figures.items()} | _ratios(figures)
+
+
+def _ratios(figures: dict[str, dict[str, Any]]) -> dict[str, float]:
+    """How the stepping paths' fastest rates compare."""
+    rate = {path: record["steps_per_s"] for path, record in figures.items()}
+    ratios = {
+        "sampler_vs_dm_control": rate["sampler"] / rate["dm_control"],
+        "sampler_vs_rollout": rate["sampler"] / rate["rollout"],
+        # Each repeat's sampler against the rollout timed right after it: the machine's
+        # drift between repeats cancels; the median of those pairs.
+        "sampler_vs_rollout_paired": float(
+            np.median(np.divide(figures["sampler"]["each_steps_per_s"], figures["rollout"]["each_steps_per_s"]))
+        ),
+        # The most any sampler of the same physics could gain over the loop here.
+        "rollout_vs_dm_control": rate["rollout"] / rate["dm_control"],
+        # What the task's own logic leaves of dm_control's loop over this physics.
+        "dm_control_vs_floor": rate["dm_control"] / rate["dm_control_floor"],
+    }
+    if "gymnasium" in figures:
+        ratios["sampler_vs_gymnasium"] = rate["sampler"] / rate["gymnasium"]
+        # The most any MuJoCo sampler of this physics could reach against Gymnasium.
+        ratios["rollout_vs_gymnasium"] = rate["rollout"] / rate["gymnasium"]
+    return ratios
 
 
 def _fastest_of(timers: dict[str, Any], repeats: int) -> dict[str, dict[str, Any]]:

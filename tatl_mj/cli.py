@@ -68,45 +68,58 @@ def _check_out(out: str) -> str | None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import signal
+    checked = _checked_run(args)
+    if isinstance(checked, str):
+        print(f"tatl run: {checked}", file=sys.stderr)
+        return 2
+    specs, seeds, methods = checked
+    outcome = _execute(args, specs, seeds, methods)
+    if isinstance(outcome, int):
+        return outcome
+    return _report(args, *outcome)
 
-    from tatl_mj.experiments import lock, records, runner
+
+def _checked_run(args: argparse.Namespace) -> tuple[list, range, dict | None] | str:
+    """The specs, seeds and methods ``tatl run`` was given, or why they cannot run; touches nothing."""
     from tatl_mj.experiments import spec as spec_mod
 
     resolved = [Path(p).resolve() for p in args.specs]
     twice = sorted({str(p) for p in args.specs if resolved.count(Path(p).resolve()) > 1})
     if twice:
-        print(f"tatl run: spec given more than once: {', '.join(twice)}", file=sys.stderr)
-        return 2
+        return f"spec given more than once: {', '.join(twice)}"
     try:
         specs = [spec_mod.load_spec(p) for p in args.specs]
         for s in specs:
             s.preset(args.preset)
     except spec_mod.SpecError as error:
-        print(f"tatl run: {error}", file=sys.stderr)
-        return 2
+        return str(error)
     names = [s.name for s in specs]
     clash = sorted({n for n in names if names.count(n) > 1})
     if clash:
-        print(
-            f"tatl run: experiment name {clash[0]!r} is used by more than one spec: "
-            f"{', '.join(s.path for s in specs if s.name == clash[0])}",
-            file=sys.stderr,
+        return (
+            f"experiment name {clash[0]!r} is used by more than one spec: "
+            f"{', '.join(s.path for s in specs if s.name == clash[0])}"
         )
-        return 2
     problem = _check_out(args.out)
     if problem:
-        print(f"tatl run: {problem}", file=sys.stderr)
-        return 2
+        return problem
     seeds = _seeds(args, specs)
     if isinstance(seeds, str):
-        print(f"tatl run: {seeds}", file=sys.stderr)
-        return 2
+        return seeds
     try:
         methods = _methods(args.methods)
     except ValueError as error:
-        print(f"tatl run: --methods: {error}", file=sys.stderr)
-        return 2
+        return f"--methods: {error}"
+    return specs, seeds, methods
+
+
+def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict | None) -> tuple[dict, Any] | int:
+    """Runs the checked specs with SIGINT and SIGTERM caught: (summary, the RunFailed or None),
+    or the exit status of a run that stopped or could not start (its message printed)."""
+    import signal
+
+    from tatl_mj.experiments import lock, records, runner
+
     previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     failed: runner.RunFailed | None = None
     try:
@@ -149,6 +162,13 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    return summary, failed
+
+
+def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
+    """Prints a finished run's timings, physics and notes; 1 when some unit failed, else 0."""
+    from tatl_mj.experiments import records, runner
+
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
     physics = runner.physics_report(args.out)

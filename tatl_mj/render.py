@@ -167,63 +167,95 @@ def iter_frames(
     step_seconds = _step_seconds(env)
     with contextlib.ExitStack() as stack:
         paint, _ = _painter(env, width, height, default_camera(env) if camera is None else camera, stack)
-        show_source = None
-        if source is not None:
-            source_env, source_state_fn = source
-            source_env.reset()
-            _, show_source = _painter(
-                source_env, width, height, default_camera(source_env) if camera is None else camera, stack
-            )
-        target_name = _domain_name(env)
-        source_name = None if source is None else _domain_name(source[0])
+        draw = _frame_drawer(env, paint, source, width, height, camera, stack)
+        yield from _clip_frames(env, policy, draw, n_frames, fps, step_seconds, method_label, on_end)
 
-        # An episode end stays on screen for hold_frames frames (at least one).
-        hold_frames = max(1, math.floor(END_HOLD_SECONDS * fps + 1e-9))
-        timestep = env.reset()
-        episode, episode_steps, episode_return = 1, 0, 0.0
-        episode_start = 0.0  # clip time at which this episode's first state is shown
-        ended, previous_end, held, end_frame = "", "", 0, None
-        for k in range(n_frames):
-            clip_time = k / fps
-            if ended:
-                if held < hold_frames:
-                    held += 1
-                    yield end_frame
-                    continue
-                if on_end == "stop":
-                    return
-                timestep = env.reset()
-                episode, episode_steps, episode_return = episode + 1, 0, 0.0
-                episode_start, previous_end, ended = clip_time, ended, ""
-            # Step until the next step would pass this frame's time.
-            while not ended and episode_start + (episode_steps + 1) * step_seconds <= clip_time + 1e-9:
-                timestep = env.step(_action(policy, _state(timestep)))
-                episode_steps += 1
-                episode_return += float(timestep.reward or 0.0)
-                if timestep.last():
-                    ended = _end_reason(env, timestep)
 
-            state = _state(timestep)
-            text = _overlay_text(
-                clock=f"t {episode_steps * step_seconds:5.2f} s"
-                if hasattr(env, "physics")
-                else f"step {episode_steps:3d}",
-                method_label=method_label,
-                episode_return=episode_return,
-                episode=episode,
-                previous_end=previous_end,
-                ended=ended,
-            )
-            image = _label(paint(), text, "top")
-            image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
-            if show_source is not None:
-                mapped = np.asarray(source_state_fn(state), dtype=np.float64).reshape(-1)
-                right = _label(show_source(mapped), f"source: {source_name} (mapped state)", "bottom")
-                right[:, :2] = 40  # a thin divider between the panels
-                image = np.concatenate([image, right], axis=1)
-            if ended:
-                end_frame, held = image, 1
-            yield image
+def _frame_drawer(
+    env: Any,
+    paint: Painter,
+    source: SourceSpec | None,
+    width: int,
+    height: int,
+    camera: str | None,
+    stack: contextlib.ExitStack,
+) -> Callable[[np.ndarray, str], np.ndarray]:
+    """A function drawing one frame from the target's state and overlay text: the target
+    labelled, and with ``source`` the source in the mapped state beside it."""
+    show_source = None
+    if source is not None:
+        source_env, source_state_fn = source
+        source_env.reset()
+        _, show_source = _painter(
+            source_env, width, height, default_camera(source_env) if camera is None else camera, stack
+        )
+    target_name = _domain_name(env)
+    source_name = None if source is None else _domain_name(source[0])
+
+    def draw(state: np.ndarray, text: str) -> np.ndarray:
+        image = _label(paint(), text, "top")
+        image = _label(image, target_name if source is None else f"target: {target_name}", "bottom")
+        if show_source is not None:
+            mapped = np.asarray(source_state_fn(state), dtype=np.float64).reshape(-1)
+            right = _label(show_source(mapped), f"source: {source_name} (mapped state)", "bottom")
+            right[:, :2] = 40  # a thin divider between the panels
+            image = np.concatenate([image, right], axis=1)
+        return image
+
+    return draw
+
+
+def _clip_frames(
+    env: Any,
+    policy: Policy,
+    draw: Callable[[np.ndarray, str], np.ndarray],
+    n_frames: int,
+    fps: float,
+    step_seconds: float,
+    method_label: str,
+    on_end: str,
+) -> Iterator[np.ndarray]:
+    """The clip's frames: ``env`` stepped on the clip's clock, each episode's end held, then
+    a new episode or (``on_end="stop"``) the end of the clip."""
+    # An episode end stays on screen for hold_frames frames (at least one).
+    hold_frames = max(1, math.floor(END_HOLD_SECONDS * fps + 1e-9))
+    timestep = env.reset()
+    episode, episode_steps, episode_return = 1, 0, 0.0
+    episode_start = 0.0  # clip time at which this episode's first state is shown
+    ended, previous_end, held, end_frame = "", "", 0, None
+    for k in range(n_frames):
+        clip_time = k / fps
+        if ended:
+            if held < hold_frames:
+                held += 1
+                yield end_frame
+                continue
+            if on_end == "stop":
+                return
+            timestep = env.reset()
+            episode, episode_steps, episode_return = episode + 1, 0, 0.0
+            episode_start, previous_end, ended = clip_time, ended, ""
+        # Step until the next step would pass this frame's time.
+        while not ended and episode_start + (episode_steps + 1) * step_seconds <= clip_time + 1e-9:
+            timestep = env.step(_action(policy, _state(timestep)))
+            episode_steps += 1
+            episode_return += float(timestep.reward or 0.0)
+            if timestep.last():
+                ended = _end_reason(env, timestep)
+
+        state = _state(timestep)
+        text = _overlay_text(
+            clock=f"t {episode_steps * step_seconds:5.2f} s" if hasattr(env, "physics") else f"step {episode_steps:3d}",
+            method_label=method_label,
+            episode_return=episode_return,
+            episode=episode,
+            previous_end=previous_end,
+            ended=ended,
+        )
+        image = draw(state, text)
+        if ended:
+            end_frame, held = image, 1
+        yield image
 
 
 def _overlay_text(

@@ -142,7 +142,15 @@ def _ratio(result: MethodResult, reference: MethodResult | None) -> str:
 
 def table(summary: dict) -> str:
     """Markdown: per experiment and method, final return, samples to threshold, ratio to TA-TL."""
-    lines = [
+    lines = [_table_preamble(summary), ""]
+    for name, exp in summary["experiments"].items():
+        lines += _experiment_section(summary, name, exp)
+    return "\n".join(lines)
+
+
+def _table_preamble(summary: dict) -> str:
+    """The paragraph above the tables: what each column and verdict means."""
+    return (
         f"Preset `{summary['preset']}`, seeds {summary['seeds']}. Methods are compared only over the "
         "seeds they all finished. Normalised score: (return - random return) / (reference return - random "
         "return), the reference fixed per experiment (under each table). IQM: the mean of the middle half of "
@@ -159,106 +167,117 @@ def table(summary: dict) -> str:
         f"{method_label(REFERENCE_METHOD)}'s (> 1: {method_label(REFERENCE_METHOD)} needed fewer). Data: "
         "`shared`, the random-policy stream every method shares; `reset`, one-step transitions from states "
         "spread over the target's box (privileged: a simulator reset a robot lacks); `online`, "
-        "epsilon-greedy episodes from the task's own starts; `stream`/`source-policy`, the planner's.",
-        "",
-    ]
-    for name, exp in summary["experiments"].items():
-        order = sorted(exp["methods"], key=_order)
-        # Methods the experiment's own spec lists but that finished no seed are flagged;
-        # other experiments' methods are not this one's business.
-        listed = list((exp.get("spec") or {}).get("methods") or summary.get("methods", order))
-        asked = [m for m in listed if m not in order]
-        comparison = compare(exp, order + asked)
-        lines += [f"### {exp['spec'].get('title', name)} (`{name}`)", ""]
-        claim = exp["spec"].get("paper_claim")
-        if claim:
-            lines += [f"Paper: {claim}", ""]
-        note = seed_note(comparison)
-        if note:
-            lines += [f"**{note}**", ""]
-        if not comparison.methods:
-            lines += ["No method finished any seed.", ""]
-            continue
-        if not comparison.seeds:
-            lines += ["**No seed was finished by every method: nothing to compare.**", ""]
-            continue
-        if not comparison.meaningful:
-            lines += [_no_threshold_sentence(comparison), ""]
-        stats_on = any("auc" in exp["methods"][r.method] for r in comparison.methods)
-        header = (
-            "| method | data | final return: mean ± sd (median) | target transitions to threshold: median (per seed) "
-        )
-        header += f"| vs {method_label(REFERENCE_METHOD)} "
+        "epsilon-greedy episodes from the task's own starts; `stream`/`source-policy`, the planner's."
+    )
+
+
+def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
+    """One experiment's heading, method table, verdicts and footnote (the table's lines)."""
+    order = sorted(exp["methods"], key=_order)
+    # Methods the experiment's own spec lists but that finished no seed are flagged;
+    # other experiments' methods are not this one's business.
+    listed = list((exp.get("spec") or {}).get("methods") or summary.get("methods", order))
+    asked = [m for m in listed if m not in order]
+    comparison = compare(exp, order + asked)
+    lines = [f"### {exp['spec'].get('title', name)} (`{name}`)", ""]
+    claim = exp["spec"].get("paper_claim")
+    if claim:
+        lines += [f"Paper: {claim}", ""]
+    note = seed_note(comparison)
+    if note:
+        lines += [f"**{note}**", ""]
+    if not comparison.methods:
+        return lines + ["No method finished any seed.", ""]
+    if not comparison.seeds:
+        return lines + ["**No seed was finished by every method: nothing to compare.**", ""]
+    if not comparison.meaningful:
+        lines += [_no_threshold_sentence(comparison), ""]
+    stats_on = any("auc" in exp["methods"][r.method] for r in comparison.methods)
+    lines += _method_rows(exp, comparison, stats_on)
+    lines += _verdict_lines(exp, comparison, stats_on)
+    return lines + _experiment_footnote(summary, exp, comparison)
+
+
+def _method_rows(exp: dict, comparison: Comparison, stats_on: bool) -> list[str]:
+    """The markdown table: its header, its rule and one row per compared method."""
+    header = "| method | data | final return: mean ± sd (median) | target transitions to threshold: median (per seed) "
+    header += f"| vs {method_label(REFERENCE_METHOD)} "
+    if stats_on:
+        header += "| normalised final score: IQM [95% CI] | area under the curve: IQM [95% CI] "
+    lines = [header + "|", "|---" * header.count("|") + "|"]
+    reference = comparison.result(REFERENCE_METHOD)
+    for r in comparison.methods:
+        data = exp["methods"][r.method]
+        finals = np.asarray(r.final_returns)
+        final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
+        if comparison.meaningful:
+            per_seed = ", ".join(_fmt_samples(v) for v in r.samples_to_threshold)
+            first = min(data["curve"]["samples"])
+            left = sum(1 for v in r.samples_to_threshold if math.isfinite(v) and v <= first)
+            censored = f"; {left} at the smallest budget (left-censored)" if left else ""
+            samples = f"{_fmt_samples(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached{censored})"
+            ratio = _ratio(r, reference)
+        else:
+            samples, ratio = "no meaningful threshold", "n/a"
+        row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {samples} | {ratio} "
         if stats_on:
-            header += "| normalised final score: IQM [95% CI] | area under the curve: IQM [95% CI] "
-        lines += [header + "|", "|---" * header.count("|") + "|"]
-        reference = comparison.result(REFERENCE_METHOD)
-        for r in comparison.methods:
-            data = exp["methods"][r.method]
-            finals = np.asarray(r.final_returns)
-            final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
-            if comparison.meaningful:
-                per_seed = ", ".join(_fmt_samples(v) for v in r.samples_to_threshold)
-                first = min(data["curve"]["samples"])
-                left = sum(1 for v in r.samples_to_threshold if math.isfinite(v) and v <= first)
-                censored = f"; {left} at the smallest budget (left-censored)" if left else ""
-                samples = f"{_fmt_samples(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached{censored})"
-                ratio = _ratio(r, reference)
-            else:
-                samples, ratio = "no meaningful threshold", "n/a"
-            row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {samples} | {ratio} "
-            if stats_on:
-                row += f"| {_interval(data.get('final_iqm'))} | {_interval(data.get('auc'))} "
-            lines.append(row + "|")
-        verdicts = [_pair_sentence(p) for p in exp.get("ablations", [])]
-        if not stats_on:
-            verdicts = [
-                ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})
-            ]
-        if any(verdicts):
-            lines += ["", "Transfer against its ablation without the source:", ""]
-            lines += [f"- {v}" for v in verdicts if v]
-        survived = {m: d["survival"] for m, d in exp["methods"].items() if "survival" in d}
-        if survived:
-            parts = [
-                f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes, seeds {_seed_range(v.get('seeds'))})"
-                for m, v in survived.items()
-            ]
-            lines += [
-                "",
-                "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
-                "compared seeds; only methods with an episode that ended early): " + "; ".join(parts) + ".",
-            ]
-        if exp.get("placebo"):
-            lines += ["", "Transfer against the same method on a placebo (untrained) source:", ""]
-            lines += [f"- {_pair_sentence(p, against='its placebo')}" for p in exp["placebo"]]
-        steady = {m: d["steadiness"] for m, d in exp["methods"].items() if "steadiness" in d}
-        if steady:
-            seeds = sorted(
-                {_seed_range(d.get("steadiness_seeds")) for d in exp["methods"].values() if "steadiness" in d}
-            )
-            lines += ["", _steadiness_sentence(steady) + f" Seeds: {'; '.join(seeds)}."]
-        best = exp.get("best_baseline")
-        if exp.get("vs_best_baseline"):
-            lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
-            lines += [f"- {_pair_sentence(p, against='the best baseline')}" for p in exp["vs_best_baseline"]]
-        threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
-        mapping = sorted(set(exp.get("mapping_target_samples", [])))
-        reference_return = exp.get("reference_return")
-        rule = (
-            f"reference return {reference_return:.4g} (fixed; threshold at a normalised score of "
-            f"{summary.get('reference_threshold', 0.9)})"
-            if reference_return is not None
-            else "no reference return declared: the threshold is relative to the best method listed"
-        )
+            row += f"| {_interval(data.get('final_iqm'))} | {_interval(data.get('auc'))} "
+        lines.append(row + "|")
+    return lines
+
+
+def _verdict_lines(exp: dict, comparison: Comparison, stats_on: bool) -> list[str]:
+    """Under the table: against the ablation, survival, placebo, steadiness and the best baseline."""
+    lines: list[str] = []
+    verdicts = [_pair_sentence(p) for p in exp.get("ablations", [])]
+    if not stats_on:
+        verdicts = [ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})]
+    if any(verdicts):
+        lines += ["", "Transfer against its ablation without the source:", ""]
+        lines += [f"- {v}" for v in verdicts if v]
+    survived = {m: d["survival"] for m, d in exp["methods"].items() if "survival" in d}
+    if survived:
+        parts = [
+            f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes, seeds {_seed_range(v.get('seeds'))})"
+            for m, v in survived.items()
+        ]
         lines += [
             "",
-            f"Random policy: {comparison.random_return:.4g}; {rule}; threshold: {threshold}; target "
-            f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
-            f"{mapping}.",
-            "",
+            "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
+            "compared seeds; only methods with an episode that ended early): " + "; ".join(parts) + ".",
         ]
-    return "\n".join(lines)
+    if exp.get("placebo"):
+        lines += ["", "Transfer against the same method on a placebo (untrained) source:", ""]
+        lines += [f"- {_pair_sentence(p, against='its placebo')}" for p in exp["placebo"]]
+    steady = {m: d["steadiness"] for m, d in exp["methods"].items() if "steadiness" in d}
+    if steady:
+        seeds = sorted({_seed_range(d.get("steadiness_seeds")) for d in exp["methods"].values() if "steadiness" in d})
+        lines += ["", _steadiness_sentence(steady) + f" Seeds: {'; '.join(seeds)}."]
+    best = exp.get("best_baseline")
+    if exp.get("vs_best_baseline"):
+        lines += ["", f"Against the best baseline here (`{best}`, by area under the curve):", ""]
+        lines += [f"- {_pair_sentence(p, against='the best baseline')}" for p in exp["vs_best_baseline"]]
+    return lines
+
+
+def _experiment_footnote(summary: dict, exp: dict, comparison: Comparison) -> list[str]:
+    """The line under an experiment: random return, threshold rule and the mapping's samples."""
+    threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
+    mapping = sorted(set(exp.get("mapping_target_samples", [])))
+    reference_return = exp.get("reference_return")
+    rule = (
+        f"reference return {reference_return:.4g} (fixed; threshold at a normalised score of "
+        f"{summary.get('reference_threshold', 0.9)})"
+        if reference_return is not None
+        else "no reference return declared: the threshold is relative to the best method listed"
+    )
+    return [
+        "",
+        f"Random policy: {comparison.random_return:.4g}; {rule}; threshold: {threshold}; target "
+        f"samples used to learn the mapping (shared by TA-TL and UMA-TL, not counted above): "
+        f"{mapping}.",
+        "",
+    ]
 
 
 def _seed_range(seeds: Sequence[int] | None) -> str:
@@ -497,13 +516,24 @@ def _iqm_panel(ax: Any, experiment: dict, order: list[str], colors: dict[str, st
     ax.set_ylim(*limits)
     ax.set_xscale("log")
     ticks = spaced_ticks(sorted({float(v) for _, x, *_ in lines for v in x}), 0.2)
-    ax.set_xticks(ticks, [compact(b) for b in ticks])
-    ax.minorticks_off()
-    ax.set_xlabel("target transitions counted (median over seeds)")
-    ax.set_ylabel(NORMALISED_LABEL)
-    ax.set_title("(a) IQM of the normalised score over seeds, 95% band", fontsize=10)
-    ax.grid(alpha=0.25)
+    _label_curve_axes(
+        ax,
+        ticks,
+        "target transitions counted (median over seeds)",
+        NORMALISED_LABEL,
+        "(a) IQM of the normalised score over seeds, 95% band",
+    )
     return handles
+
+
+def _label_curve_axes(ax: Any, x_ticks: list[float], xlabel: str, ylabel: str, title: str) -> None:
+    """Panel (a)'s log-axis ticks (only those given), labels, title and grid."""
+    ax.set_xticks(x_ticks, [compact(b) for b in x_ticks])
+    ax.minorticks_off()
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.25)
 
 
 def _improvement_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> None:
@@ -580,16 +610,51 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
-    from matplotlib.ticker import FuncFormatter
 
     order = sorted(experiment["methods"], key=_order) if methods is None else list(methods)
     comparison = compare(experiment, order)
     results = comparison.methods
     colors = method_colors([r.method for r in results])
     fig, (ax_curve, ax_len) = plt.subplots(1, 2, figsize=(11, 4.0))
-    handles: list[Any] = []
+    references = [
+        v for v in (comparison.random_return, comparison.threshold if comparison.meaningful else None) if v is not None
+    ]
+    handles, clipped_values = _curve_panel(ax_curve, experiment, comparison, colors, references)
 
-    # Panel (a): thin per-seed lines, a thick median, references.
+    # Panel (b): per-seed samples to threshold (or final returns without a threshold).
+    positions = np.arange(len(results))
+    spread = np.linspace(-0.18, 0.18, max(1, len(comparison.seeds))) if len(comparison.seeds) > 1 else [0.0]
+    if comparison.meaningful:
+        ticks = _threshold_panel(ax_len, experiment, results, colors, spread)
+        handles += [
+            Line2D([], [], color="black", marker="o", ms=3.5, lw=0, label="(b) one seed"),
+            Line2D([], [], color="0.3", lw=3, label="(b) median, 'never' counted as infinite"),
+        ]
+    else:
+        ticks = _final_return_panel(ax_len, comparison, colors, spread, references)
+    # Up to five methods fit side by side (labels wrapped); more are slanted.
+    many = len(results) > 5
+    ax_len.set_xticks(
+        positions,
+        ticks,
+        fontsize=8,
+        rotation=30 if many else 0,
+        ha="right" if many else "center",
+        rotation_mode="anchor" if many else "default",
+    )
+    ax_len.set_xlim(-0.6, len(results) - 0.4)
+    ax_len.grid(axis="y", alpha=0.25)
+
+    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
+    _lay_out(fig, handles, ticks, many, _caption(comparison, clipped_values, experiment.get("reference_return")))
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _seed_curves(experiment: dict, results: Sequence[MethodResult]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per method, its compared seeds' (target transitions counted, mean return) at each budget."""
     curves = {}
     for r in results:
         data = experiment["methods"][r.method]
@@ -601,43 +666,28 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
             np.where(counted[rows] > 0, counted[rows], budgets),
             np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows],
         )
-    references = [
-        v for v in (comparison.random_return, comparison.threshold if comparison.meaningful else None) if v is not None
-    ]
+    return curves
+
+
+def _curve_panel(
+    ax: Any, experiment: dict, comparison: Comparison, colors: dict[str, str], references: list[float]
+) -> tuple[list[Any], list[float]]:
+    """Panel (a): thin per-seed lines, a thick median, references; returns the legend handles
+    and the values drawn clipped."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter
+
+    curves = _seed_curves(experiment, comparison.methods)
     limits = axis_limits([v for _, y in curves.values() for v in y.ravel()], references)
-    clipped = 0
-    clipped_values: list[float] = []
-    for r in results:
-        counts, returns = curves[r.method]
-        color = colors[r.method]
-        for seed_counts, seed_returns in zip(counts, returns):
-            ax_curve.plot(seed_counts, seed_returns, color=color, lw=0.7, alpha=0.45)
-            clipped += _mark_clipped(ax_curve, seed_counts, seed_returns, limits, color)
-            clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
-        median = np.median(returns, axis=0)
-        style = LINE_STYLES[len(handles) % len(LINE_STYLES)]  # identical curves stay visible
-        ax_curve.plot(np.median(counts, axis=0), median, color=color, lw=2.2, ls=style, marker="o", ms=3.5)
-        seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
-        handles.append(
-            Line2D(
-                [],
-                [],
-                color=color,
-                lw=2.2,
-                ls=style,
-                marker="o",
-                ms=3.5,
-                label=f"{method_label(r.method)}: median of {seeds}",
-            )
-        )
+    handles, clipped, clipped_values = _draw_seed_curves(ax, comparison.methods, curves, colors, limits)
     handles.append(Line2D([], [], color="0.4", lw=0.7, alpha=0.8, label="thin lines: one seed each"))
     if comparison.random_return is not None:
-        ax_curve.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
+        ax.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
         handles.append(
             Line2D([], [], color="0.45", ls=":", lw=1.2, label=f"random policy ({comparison.random_return:.4g})")
         )
     if comparison.meaningful:
-        ax_curve.axhline(comparison.threshold, color="black", ls="--", lw=0.9)
+        ax.axhline(comparison.threshold, color="black", ls="--", lw=0.9)
         handles.append(Line2D([], [], color="black", ls="--", lw=0.9, label=f"threshold ({comparison.threshold:.4g})"))
     if clipped:
         handles.append(
@@ -653,79 +703,117 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
                 label=f"beyond the axis, clipped ({clipped} point{'s' * (clipped > 1)})",
             )
         )
-    ax_curve.set_ylim(*limits)
-    ax_curve.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
-    ax_curve.set_xscale("log")
+    ax.set_ylim(*limits)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
+    ax.set_xscale("log")
     budgets = sorted({float(b) for counts, _ in curves.values() for b in np.median(counts, axis=0)})
     span = math.log10(max(budgets) / min(budgets)) if budgets else 0.0
     x_ticks = spaced_ticks(budgets, max(0.12, span / 9))
-    ax_curve.set_xticks(x_ticks, [compact(b) for b in x_ticks])
-    ax_curve.minorticks_off()
-    ax_curve.set_xlabel("target transitions counted (samples, Algorithm 2's rollouts, own data)")
-    ax_curve.set_ylabel(RETURN_LABEL)
-    ax_curve.set_title("(a) return (mean over evaluation episodes)", fontsize=10)
-    ax_curve.grid(alpha=0.25)
-
-    # Panel (b): per-seed samples to threshold (or final returns without a threshold).
-    positions = np.arange(len(results))
-    spread = np.linspace(-0.18, 0.18, max(1, len(comparison.seeds))) if len(comparison.seeds) > 1 else [0.0]
-    if comparison.meaningful:
-        largest = max(r.largest_budget for r in results)
-        never = largest * 3.0  # a row above every budget on the log axis
-        for i, r in enumerate(results):
-            values = np.asarray([never if math.isinf(v) else v for v in r.samples_to_threshold])
-            median = never if math.isinf(r.median_samples) else r.median_samples
-            ax_len.hlines(median, i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
-            ax_len.scatter(i + np.asarray(spread), values, color="black", s=12, zorder=3)
-        ax_len.set_yscale("log")
-        ax_len.axhspan(largest * 1.7, never * 1.8, color="0.92", zorder=0)
-        smallest = min(min(experiment["methods"][r.method]["curve"]["samples"]) for r in results)
-        ax_len.set_ylim(smallest / 1.6, never * 1.8)
-        budget_ticks = sorted({b for r in results for b in experiment["methods"][r.method]["curve"]["samples"]})
-        budget_ticks = spaced_ticks(budget_ticks, max(0.1, math.log10(never / smallest) / 12))
-        ax_len.set_yticks(budget_ticks + [never], [compact(b) for b in budget_ticks] + ["never"])
-        ax_len.minorticks_off()
-        ax_len.set_ylabel("target transitions to threshold")
-        ax_len.set_title("(b) target transitions to threshold", fontsize=10)
-        ticks = [f"{_wrap(method_label(r.method))}\n{r.reached}/{len(r.seeds)} reached" for r in results]
-        if len(results) > 5:  # slanted below: one line each
-            ticks = [f"{method_label(r.method)} ({r.reached}/{len(r.seeds)})" for r in results]
-        handles += [
-            Line2D([], [], color="black", marker="o", ms=3.5, lw=0, label="(b) one seed"),
-            Line2D([], [], color="0.3", lw=3, label="(b) median, 'never' counted as infinite"),
-        ]
-    else:
-        finals = [v for r in results for v in r.final_returns]
-        final_limits = axis_limits(finals, references)
-        for i, r in enumerate(results):
-            values = np.asarray(r.final_returns)
-            ax_len.hlines(np.median(values), i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
-            ax_len.scatter(i + np.asarray(spread), np.clip(values, *final_limits), color="black", s=12, zorder=3)
-            _mark_clipped(ax_len, i + np.asarray(spread), values, final_limits, colors[r.method])
-        if comparison.random_return is not None:
-            ax_len.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
-        ax_len.set_ylim(*final_limits)
-        ax_len.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
-        ax_len.set_ylabel(f"final {RETURN_LABEL}")
-        ax_len.set_title("(b) final return (no meaningful threshold)", fontsize=10)
-        ticks = [_wrap(method_label(r.method)) if len(results) <= 5 else method_label(r.method) for r in results]
-    # Up to five methods fit side by side (labels wrapped); more are slanted.
-    many = len(results) > 5
-    ax_len.set_xticks(
-        positions,
-        ticks,
-        fontsize=8,
-        rotation=30 if many else 0,
-        ha="right" if many else "center",
-        rotation_mode="anchor" if many else "default",
+    _label_curve_axes(
+        ax,
+        x_ticks,
+        "target transitions counted (samples, Algorithm 2's rollouts, own data)",
+        RETURN_LABEL,
+        "(a) return (mean over evaluation episodes)",
     )
-    ax_len.set_xlim(-0.6, len(results) - 0.4)
-    ax_len.grid(axis="y", alpha=0.25)
+    return handles, clipped_values
 
-    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
+
+def _draw_seed_curves(
+    ax: Any,
+    results: Sequence[MethodResult],
+    curves: dict[str, tuple[np.ndarray, np.ndarray]],
+    colors: dict[str, str],
+    limits: tuple[float, float],
+) -> tuple[list[Any], int, list[float]]:
+    """Each seed's curve thin, each method's median thick; returns one legend handle per method,
+    how many points lie beyond ``limits`` (drawn as triangles on the edge) and their values."""
+    from matplotlib.lines import Line2D
+
+    handles: list[Any] = []
+    clipped = 0
+    clipped_values: list[float] = []
+    for r in results:
+        counts, returns = curves[r.method]
+        color = colors[r.method]
+        for seed_counts, seed_returns in zip(counts, returns):
+            ax.plot(seed_counts, seed_returns, color=color, lw=0.7, alpha=0.45)
+            clipped += _mark_clipped(ax, seed_counts, seed_returns, limits, color)
+            clipped_values += [v for v in seed_returns if not limits[0] <= v <= limits[1]]
+        median = np.median(returns, axis=0)
+        style = LINE_STYLES[len(handles) % len(LINE_STYLES)]  # identical curves stay visible
+        ax.plot(np.median(counts, axis=0), median, color=color, lw=2.2, ls=style, marker="o", ms=3.5)
+        seeds = f"{len(r.seeds)} seed{'s' * (len(r.seeds) > 1)}"
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color=color,
+                lw=2.2,
+                ls=style,
+                marker="o",
+                ms=3.5,
+                label=f"{method_label(r.method)}: median of {seeds}",
+            )
+        )
+    return handles, clipped, clipped_values
+
+
+def _threshold_panel(
+    ax: Any, experiment: dict, results: Sequence[MethodResult], colors: dict[str, str], spread: Any
+) -> list[str]:
+    """Panel (b) with a threshold: each seed's target transitions to it, 'never' on a row of its own;
+    returns the method tick labels."""
+    largest = max(r.largest_budget for r in results)
+    never = largest * 3.0  # a row above every budget on the log axis
+    for i, r in enumerate(results):
+        values = np.asarray([never if math.isinf(v) else v for v in r.samples_to_threshold])
+        median = never if math.isinf(r.median_samples) else r.median_samples
+        ax.hlines(median, i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
+        ax.scatter(i + np.asarray(spread), values, color="black", s=12, zorder=3)
+    ax.set_yscale("log")
+    ax.axhspan(largest * 1.7, never * 1.8, color="0.92", zorder=0)
+    smallest = min(min(experiment["methods"][r.method]["curve"]["samples"]) for r in results)
+    ax.set_ylim(smallest / 1.6, never * 1.8)
+    budget_ticks = sorted({b for r in results for b in experiment["methods"][r.method]["curve"]["samples"]})
+    budget_ticks = spaced_ticks(budget_ticks, max(0.1, math.log10(never / smallest) / 12))
+    ax.set_yticks(budget_ticks + [never], [compact(b) for b in budget_ticks] + ["never"])
+    ax.minorticks_off()
+    ax.set_ylabel("target transitions to threshold")
+    ax.set_title("(b) target transitions to threshold", fontsize=10)
+    ticks = [f"{_wrap(method_label(r.method))}\n{r.reached}/{len(r.seeds)} reached" for r in results]
+    if len(results) > 5:  # slanted below: one line each
+        ticks = [f"{method_label(r.method)} ({r.reached}/{len(r.seeds)})" for r in results]
+    return ticks
+
+
+def _final_return_panel(
+    ax: Any, comparison: Comparison, colors: dict[str, str], spread: Any, references: list[float]
+) -> list[str]:
+    """Panel (b) without a meaningful threshold: each seed's final return; returns the method tick labels."""
+    from matplotlib.ticker import FuncFormatter
+
+    results = comparison.methods
+    finals = [v for r in results for v in r.final_returns]
+    final_limits = axis_limits(finals, references)
+    for i, r in enumerate(results):
+        values = np.asarray(r.final_returns)
+        ax.hlines(np.median(values), i - 0.3, i + 0.3, color=colors[r.method], lw=3, zorder=2)
+        ax.scatter(i + np.asarray(spread), np.clip(values, *final_limits), color="black", s=12, zorder=3)
+        _mark_clipped(ax, i + np.asarray(spread), values, final_limits, colors[r.method])
+    if comparison.random_return is not None:
+        ax.axhline(comparison.random_return, color="0.45", ls=":", lw=1.2)
+    ax.set_ylim(*final_limits)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: compact(v)))
+    ax.set_ylabel(f"final {RETURN_LABEL}")
+    ax.set_title("(b) final return (no meaningful threshold)", fontsize=10)
+    return [_wrap(method_label(r.method)) if len(results) <= 5 else method_label(r.method) for r in results]
+
+
+def _lay_out(fig: Any, handles: list[Any], ticks: list[str], many: bool, caption: str) -> None:
+    """The legend and the caption under the panels, the figure grown to hold them."""
     ncol = min(3, len(handles))
     legend = fig.legend(handles=handles, loc="upper center", ncol=ncol, fontsize=8, frameon=False)
-    caption = _caption(comparison, clipped_values, experiment.get("reference_return"))
     caption_lines = caption.count("\n") + 1
     legend_rows = math.ceil(len(handles) / ncol)
     # Room under the panels for tick labels, the legend and the caption, in inches.
@@ -739,10 +827,6 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
     fig.subplots_adjust(left=0.07, right=0.98, top=1 - 0.55 / height, bottom=block / height, wspace=0.25)
     legend.set_bbox_to_anchor((0.5, (block - tick_room) / height), transform=fig.transFigure)
     fig.text(0.07, 0.1 / height, caption, fontsize=7.5, va="bottom", ha="left")
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
 
 
 def _wrap(label: str) -> str:

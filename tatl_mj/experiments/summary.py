@@ -309,49 +309,8 @@ def _random_by_seed(experiment: dict) -> dict[int, float] | None:
 def _experiment(
     run_dir: RunDirectory, name: str, seeds: list[int], methods: list[str], reference: float | None = None
 ) -> dict:
-    sources = {}
-    for seed in seeds:
-        path = run_dir.record_path(name, seed, "source")
-        if path.exists():
-            sources[seed] = read_json(path)
-    records: dict[str, dict[int, dict]] = {m: {} for m in methods}
-    for m in methods:
-        for seed in seeds:
-            path = run_dir.record_path(name, seed, m)
-            if path.exists():
-                records[m][seed] = read_json(path)
-    out_methods = {}
-    for m, recs in records.items():
-        seeds_done = sorted(recs)
-        if not seeds_done:
-            continue
-        curves = [recs[s]["curve"] for s in seeds_done]
-        out_methods[m] = {
-            "seeds": seeds_done,
-            "final_return": [recs[s]["final_return"] for s in seeds_done],
-            "curve": {
-                "samples": [p["samples"] for p in curves[0]],
-                "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
-                "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
-                # Every real-target transition counted at each budget ([seed][budget]).
-                "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
-            },
-            "data": recs[seeds_done[0]].get("data", "shared"),
-            # Per seed, each evaluation episode's steps at the largest budget (records that have them).
-            "final_steps": {
-                str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]
-            },
-            # Per seed, each evaluation episode's steadiness at the largest budget (where declared).
-            "final_steadiness": {
-                str(s): recs[s]["curve"][-1]["steadiness"] for s in seeds_done if "steadiness" in recs[s]["curve"][-1]
-            },
-            "extra": {
-                k: [recs[s].get(k) for s in seeds_done]
-                for k in ("algorithm2_samples",)
-                if any(k in recs[s] for s in seeds_done)
-            },
-            "wall_s": [recs[s].get("wall_s") for s in seeds_done],
-        }
+    sources, records = _read_records(run_dir, name, seeds, methods)
+    out_methods = {m: _method_entry(recs) for m, recs in records.items() if recs}
     source_seeds = sorted(sources)
     # Per method, the seeds on which Algorithm 2's stopping rule was not met within some budget.
     unmet = {
@@ -392,6 +351,54 @@ def _experiment(
         }
     )
     return experiment
+
+
+def _read_records(
+    run_dir: RunDirectory, name: str, seeds: list[int], methods: list[str]
+) -> tuple[dict[int, dict], dict[str, dict[int, dict]]]:
+    """The experiment's source records by seed, and each method's records by seed (those present)."""
+    sources = {}
+    for seed in seeds:
+        path = run_dir.record_path(name, seed, "source")
+        if path.exists():
+            sources[seed] = read_json(path)
+    records: dict[str, dict[int, dict]] = {m: {} for m in methods}
+    for m in methods:
+        for seed in seeds:
+            path = run_dir.record_path(name, seed, m)
+            if path.exists():
+                records[m][seed] = read_json(path)
+    return sources, records
+
+
+def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
+    """One method's summary from its records by seed (at least one): curves, finals and extras."""
+    seeds_done = sorted(recs)
+    curves = [recs[s]["curve"] for s in seeds_done]
+    return {
+        "seeds": seeds_done,
+        "final_return": [recs[s]["final_return"] for s in seeds_done],
+        "curve": {
+            "samples": [p["samples"] for p in curves[0]],
+            "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
+            "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
+            # Every real-target transition counted at each budget ([seed][budget]).
+            "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
+        },
+        "data": recs[seeds_done[0]].get("data", "shared"),
+        # Per seed, each evaluation episode's steps at the largest budget (records that have them).
+        "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]},
+        # Per seed, each evaluation episode's steadiness at the largest budget (where declared).
+        "final_steadiness": {
+            str(s): recs[s]["curve"][-1]["steadiness"] for s in seeds_done if "steadiness" in recs[s]["curve"][-1]
+        },
+        "extra": {
+            k: [recs[s].get(k) for s in seeds_done]
+            for k in ("algorithm2_samples",)
+            if any(k in recs[s] for s in seeds_done)
+        },
+        "wall_s": [recs[s].get("wall_s") for s in seeds_done],
+    }
 
 
 AUC_POINTS = 256

@@ -589,12 +589,42 @@ def align_transitions(
     )
     source, target = _unwrapped(source, masks[0]), _unwrapped(target, masks[1])
     rng = rng if rng is not None else np.random.default_rng(0)
-    if len(source) > settings.max_samples:
-        source = _subset(source, rng.choice(len(source), settings.max_samples, replace=False))
-    if len(target) > settings.max_samples:
-        target = _subset(target, rng.choice(len(target), settings.max_samples, replace=False))
+    source = _at_most(source, settings.max_samples, rng)
+    target = _at_most(target, settings.max_samples, rng)
 
     source_model = _IncrementModel.fit(source, n_actions, "source")
+    candidates = _transition_candidates(source, target, source_model, n_actions, settings, rng)
+    step = source_step if source_step is not None else source_model.step
+    best, (score, rate) = _most_consistent(candidates, target, step, masks)
+    label, mapping = candidates[best]
+    record = {
+        "kind": "transition_alignment",
+        "matrix": mapping.matrix.tolist(),
+        "offset": mapping.offset.tolist(),
+        "candidate": label,
+        "rate": rate,
+        "consistency": score,
+        "candidates": len(candidates),
+    }
+    return mapping, record
+
+
+def _at_most(t: Transitions, n: int, rng: np.random.Generator) -> Transitions:
+    """``t``, or a random ``n`` of its transitions (without replacement) when it has more."""
+    if len(t) > n:
+        return _subset(t, rng.choice(len(t), n, replace=False))
+    return t
+
+
+def _transition_candidates(
+    source: Transitions,
+    target: Transitions,
+    source_model: _IncrementModel,
+    n_actions: int,
+    settings: TransitionAlignment,
+    rng: np.random.Generator,
+) -> list[tuple[str, AffineMapping]]:
+    """The labelled candidate maps :func:`align_transitions` chooses among (its step 1)."""
     candidates = _model_candidates(source_model, _IncrementModel.fit(target, n_actions, "target"), settings.rates)
     if settings.sign_flips and min(source.state_dim, target.state_dim) <= 6:
         shared = align_manifolds(
@@ -606,8 +636,17 @@ def align_transitions(
             max_samples=settings.max_samples,
         )
         candidates += _sign_flip_candidates(shared)
+    return candidates
 
-    step = source_step if source_step is not None else source_model.step
+
+def _most_consistent(
+    candidates: list[tuple[str, AffineMapping]],
+    target: Transitions,
+    step: SourceStep,
+    masks: tuple[tuple[bool, ...] | None, tuple[bool, ...] | None],
+) -> tuple[int, tuple[float, float]]:
+    """The index of the candidate with the least dynamics inconsistency on ``target``, and its
+    (score, fitted rate); a candidate whose mapped states ``step`` rejects scores infinite."""
     scores = []
     for _, candidate in candidates:
         try:
@@ -617,17 +656,7 @@ def align_transitions(
     best = int(np.argmin([score for score, _ in scores]))
     if not np.isfinite(scores[best][0]):
         raise ValueError("align_transitions: the source step rejected every candidate map's states")
-    label, mapping = candidates[best]
-    record = {
-        "kind": "transition_alignment",
-        "matrix": mapping.matrix.tolist(),
-        "offset": mapping.offset.tolist(),
-        "candidate": label,
-        "rate": scores[best][1],
-        "consistency": scores[best][0],
-        "candidates": len(candidates),
-    }
-    return mapping, record
+    return best, scores[best]
 
 
 __all__ = [
