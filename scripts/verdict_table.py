@@ -11,15 +11,9 @@ from __future__ import annotations
 import json
 import sys
 
+from tatl_mj.experiments.plot import interval_text as interval
+
 WORDS = {"credited": "**credited**", "worse": "**worse**", "not credited": "not credited"}
-
-
-def interval(estimate: dict | None) -> str:
-    if not estimate or estimate.get("value") is None:
-        return "n/a"
-    if estimate.get("low") is None:
-        return f"{estimate['value']:.2f} (no interval)"
-    return f"{estimate['value']:.2f} [{estimate['low']:.2f}, {estimate['high']:.2f}]"
 
 
 def rows(summary: dict, prefix: str = "") -> list[str]:

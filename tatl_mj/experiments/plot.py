@@ -221,7 +221,7 @@ def _method_rows(exp: dict, comparison: Comparison, stats_on: bool) -> list[str]
             samples, ratio = "no meaningful threshold", "n/a"
         row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {samples} | {ratio} "
         if stats_on:
-            row += f"| {_interval(data.get('final_iqm'))} | {_interval(data.get('auc'))} "
+            row += f"| {interval_text(data.get('final_iqm'))} | {interval_text(data.get('auc'))} "
         lines.append(row + "|")
     return lines
 
@@ -298,7 +298,7 @@ def _steadiness_sentence(steady: dict) -> str:
         for name, estimate in measures.items():
             label, unit, scale = units.get(name, (name, "", 1.0))
             scaled = {k: None if estimate[k] is None else estimate[k] * scale for k in ("value", "low", "high")}
-            shown.append(f"{label} {_interval(scaled)}{' ' + unit if unit else ''}")
+            shown.append(f"{label} {interval_text(scaled)}{' ' + unit if unit else ''}")
         parts.append(f"{method_label(method)}: " + ", ".join(shown))
     return (
         "Steadiness at the largest budget, over each episode's steps before it ended (IQM over seeds of the "
@@ -323,7 +323,7 @@ def aggregate_table(summary: dict) -> str:
     ]
     for name in sorted(rows, key=lambda m: -(rows[m]["value"] or -math.inf)):
         r = rows[name]
-        lines.append(f"| {method_label(name)} | {r['experiments']} | {r['runs']} | {_interval(r)} |")
+        lines.append(f"| {method_label(name)} | {r['experiments']} | {r['runs']} | {interval_text(r)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -356,7 +356,7 @@ def profile(summary: dict, path: str | Path) -> Path:
     return path
 
 
-def _interval(estimate: dict | None) -> str:
+def interval_text(estimate: dict | None) -> str:
     if not estimate or estimate.get("value") is None:
         return "n/a"
     if estimate.get("low") is None:
@@ -391,8 +391,8 @@ def _pair_sentence(pair: dict, against: str = "its source-free ablation") -> str
         ]
     return (
         f"`{a}` vs `{b}`: P(`{a}` > `{b}`) on the area under the curve "
-        f"{_interval(pair['probability_of_improvement'])}, at the largest budget "
-        f"{_interval(pair['probability_of_improvement_final'])}: {outcome} ({meaning})."
+        f"{interval_text(pair['probability_of_improvement'])}, at the largest budget "
+        f"{interval_text(pair['probability_of_improvement_final'])}: {outcome} ({meaning})."
     )
 
 
@@ -889,7 +889,8 @@ def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
         row = [str(condition[k]) for k in params]
         for key in pairs:
             pair = found.get(key)
-            row.append("n/a" if pair is None else f"{_interval(pair['probability_of_improvement'])} {pair['verdict']}")
+            estimate = None if pair is None else pair["probability_of_improvement"]
+            row.append("n/a" if pair is None else f"{interval_text(estimate)} {pair['verdict']}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines + [""])
 
