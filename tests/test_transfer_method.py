@@ -1,5 +1,7 @@
 """The plug-in interface and the built-in methods (tatl_mj.transfer.method, baselines)."""
 
+import types
+
 import numpy as np
 import pytest
 
@@ -187,3 +189,23 @@ def test_problem_validation():
             discrete=False,
             control_timestep=0.1,
         )
+
+
+def test_the_method_contract_fills_in_its_defaults_and_reads_what_a_method_declares():
+    from tatl_mj.transfer import method as method_mod
+    from tatl_mj.transfer.registry import build
+
+    class Bare:
+        name = "bare"
+
+        def learn(self, problem, target_samples):
+            return lambda states: states[:, :1] * 0
+
+    bare = method_mod.contract(Bare())
+    assert (bare.uses_samples, bare.data, bare.source, bare.check) == (True, "shared", "trained", None)
+    online = method_mod.contract(build("rl-online"))
+    assert online.data == "online" and online.check is not None
+    assert method_mod.contract(build("projected-source")).uses_samples is False
+    assert method_mod.contract(build("ta-tl-x", {"method": "ta-tl", "source": "placebo"})).source == "placebo"
+    assert method_mod.samples_used(lambda s: s, 300) == 300
+    assert method_mod.samples_used(types.SimpleNamespace(samples_used=120), 300) == 120

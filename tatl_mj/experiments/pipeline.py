@@ -572,7 +572,7 @@ def transfer_problem(
 
 
 def _placebo(transfer: Any) -> bool:
-    return getattr(transfer, "source", "trained") == "placebo"
+    return method.contract(transfer).source == "placebo"
 
 
 def learned_policy(
@@ -611,11 +611,12 @@ def run_method(
     ledger = Ledger()
     target = describe(spec.target)
     problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
-    data = str(getattr(transfer, "data", "shared"))
+    hooks = method.contract(transfer)
+    data = hooks.data
     eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
     # A method that uses no target samples (an oracle, a reference) learns the same
     # policy at every budget: it is learned and evaluated once and its point repeated.
-    uses_samples = getattr(transfer, "uses_samples", True)
+    uses_samples = hooks.uses_samples
     curve: list[dict] = []
     for budget in preset.target_budgets:
         if curve and not uses_samples:
@@ -631,8 +632,7 @@ def run_method(
         recorder = _Recorder(policy) if target.steadiness else None
         returns, lengths = evaluate(spec, preset, policy if recorder is None else recorder, eval_seed)
         steady = {} if recorder is None else {"steadiness": steadiness(target, *recorder.per_episode(lengths))}
-        reported = getattr(policy, "samples_used", None)
-        used = (int(budget) if reported is None else int(reported)) if uses_samples else 0
+        used = method.samples_used(policy, budget) if uses_samples else 0
         stream = used if data in STREAM_DATA else 0
         curve.append(
             {

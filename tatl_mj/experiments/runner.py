@@ -39,7 +39,7 @@ from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
 from tatl_mj.transfer import registry
-from tatl_mj.transfer.method import TransferMethod
+from tatl_mj.transfer.method import TransferMethod, contract
 
 EXECUTORS = ("local", "ray")
 SOURCE_UNIT = "source"
@@ -305,8 +305,7 @@ def _plan(
 def _check_applies(spec: ExperimentSpec, name: str) -> None:
     """A built-in the spec does not list runs with its defaults: refuse it now if it cannot
     run on the spec's tasks (a grid planner on a pendulum), naming why."""
-    method = registry.build(name)
-    check = getattr(method, "check", None)
+    check = contract(registry.build(name)).check
     if check is None:
         return
     try:

@@ -371,8 +371,9 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
         try:
-            method = build_method(name, settings)
-            check = getattr(method, "check", None)
+            from tatl_mj.transfer.method import contract
+
+            check = contract(build_method(name, settings)).check
             if check is not None:
                 check(source, target)
         except (TypeError, ValueError) as error:

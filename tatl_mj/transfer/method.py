@@ -163,11 +163,55 @@ class TransferProblem:
 
 @runtime_checkable
 class TransferMethod(Protocol):
-    """A transfer method that the experiments can compare."""
+    """A transfer method that the experiments can compare: a ``name`` and ``learn``.
+
+    The experiments also read these optional attributes, with these defaults
+    (:func:`contract` reads them, the one place that does):
+
+    - ``check(source, target)``: raises ValueError (one line) where the method
+      cannot run on these tasks' descriptions; called when a spec is loaded and
+      before a run starts (default: none);
+    - ``uses_samples``: False for a reference that learns nothing from the target
+      (learned and evaluated once, counts 0; default True);
+    - ``data``: where its transitions come from, ``"shared"`` (the first n of
+      the shared random-policy stream, counted as used) or its own (anything
+      else: only what the problem's hooks hand out is counted; default "shared");
+    - ``source``: ``"trained"`` or ``"placebo"`` (the problem then holds an
+      untrained source Q of the trained one's shape; default "trained");
+    - on the returned policy, ``samples_used``: how many of the n shared samples
+      it kept (Algorithm 2 may stop early; default n).
+    """
 
     name: str
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy: ...
+
+
+@dataclasses.dataclass(frozen=True)
+class Contract:
+    """What the experiments read of a method beyond ``name`` and ``learn`` (see
+    :class:`TransferMethod`), with its defaults filled in."""
+
+    uses_samples: bool = True
+    data: str = "shared"
+    source: str = "trained"
+    check: Callable[[TaskDescription, TaskDescription], None] | None = None
+
+
+def contract(method: Any) -> Contract:
+    """``method``'s optional hooks and attributes, defaults where it has none."""
+    return Contract(
+        uses_samples=bool(getattr(method, "uses_samples", True)),
+        data=str(getattr(method, "data", "shared")),
+        source=str(getattr(method, "source", "trained")),
+        check=getattr(method, "check", None),
+    )
+
+
+def samples_used(policy: Any, budget: int) -> int:
+    """How many of the ``budget`` shared samples ``policy`` kept (its ``samples_used``, else all)."""
+    reported = getattr(policy, "samples_used", None)
+    return int(budget) if reported is None else int(reported)
 
 
 def check_features(owner: str, field: str, spec: Any, state_dim: int | None = None) -> None:
@@ -538,5 +582,8 @@ __all__ = [
     "TransferProblem",
     "UMATL",
     "UMATLPrior",
+    "Contract",
     "check_features",
+    "contract",
+    "samples_used",
 ]
