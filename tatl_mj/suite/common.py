@@ -45,8 +45,8 @@ def _compiled(xml: str, assets: tuple[tuple[str, bytes], ...]) -> wrapper.MjMode
 def compile_physics(physics_type: type[engine.Physics], xml: str, assets: dict[str, bytes]) -> Any:
     """``physics_type.from_xml_string(xml, assets)``, each distinct model compiled once.
 
-    Compiling is most of the cost of a ``suite.load`` (~25 of 37 ms for
-    cart-pole), and the sampler loads an environment per call. Every physics
+    Compiling is most of the cost of a ``suite.load``, and the sampler loads an
+    environment per call. Every physics
     gets its own copy of the model, so runtime model edits stay its own.
     """
     return physics_type.from_model(_compiled(xml, tuple(sorted(assets.items()))).copy())

@@ -45,7 +45,7 @@ The target model is any batched one-step function ``model(states (N, d), action_
 (actuator values in) for the oracle ablation. Differences on the ``periodic``
 coordinates (pass ``apprentice.periodic``) are taken the shorter way round.
 
-Wiring (the three methods of issue 12 are one class with different settings):
+Wiring (horizon TA-TL and its two ablations are one class with different settings):
 
 - horizon TA-TL: ``HorizonTATLPolicy(apprentice.predict, low, high, horizon=round(T_h /
   dt_T), step_ratio=dt_S / dt_T, weights=w, source_q=q, mapping=chi, source_step=P_S,
@@ -423,8 +423,8 @@ class HorizonTATL(TATL):
       linearisation at the target's zero state (:func:`linearised`) stands in for the
       apprentice, an ablation that separates the apprentice's estimation error from
       the rule's; it uses no target samples. (Stepping the simulator itself inside
-      the horizon costs about 20 simulator calls per decision, 4 ms each on the
-      bicycle: too slow for 60 s evaluations.)
+      the horizon would cost about 20 simulator calls per decision: too slow for
+      long evaluations.)
     """
 
     horizon: int = 20
