@@ -6,7 +6,7 @@ import scipy.linalg
 
 from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot
 from tatl_mj.transfer.fqi import (
-    ExtraTreesRegressor,
+    ExtraTrees,
     LinearRegressor,
     TabularQ,
     fitted_q_iteration,
@@ -94,7 +94,7 @@ def test_fqi_greedy_policy_has_the_lqr_sign_pattern(which):
         required = 0.9
     else:
         data, gain, actions = _double_integrator(3_000, seed=0)
-        q = fitted_q_iteration(data, 3, ExtraTreesRegressor(n_estimators=10, seed=0), 0.9, 20)
+        q = fitted_q_iteration(data, 3, ExtraTrees(n_estimators=10, seed=0), 0.9, 20)
         required = 0.9
     grid = np.stack(np.meshgrid(np.linspace(-0.8, 0.8, 31), np.linspace(-0.8, 0.8, 31)), -1).reshape(-1, 2)
     u_lqr = -grid @ gain
@@ -151,7 +151,7 @@ def test_degenerate_input_raises_clear_errors():
     with pytest.raises(ValueError, match="valid kinds"):
         make_regressor({"kind": "mlp"}, 2)
     with pytest.raises(ValueError, match="min_samples_leaf"):
-        ExtraTreesRegressor(min_samples_leaf=0)
+        ExtraTrees(min_samples_leaf=0)
     with pytest.raises(ValueError, match="state indices"):
         q_iteration(np.array([[5]]), np.zeros((1, 1)), np.zeros((1, 1), bool), 0.9)
 
@@ -167,7 +167,7 @@ def test_make_regressor_from_spec():
     )
     assert isinstance(reg, LinearRegressor) and reg.ridge == 1e-4 and reg.features.size(2) == 21
     trees = make_regressor({"kind": "extra_trees", "seed": 3}, 2)
-    assert trees == ExtraTreesRegressor(50, 5, 2, 3)
+    assert trees == ExtraTrees(50, 5, 2, 3)
 
 
 def test_make_regressor_accepts_a_learner_section_with_both_seed_and_features():

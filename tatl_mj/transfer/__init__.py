@@ -10,7 +10,7 @@ from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_appren
 from tatl_mj.transfer.baselines import MappedQ, rl, uma_tl
 from tatl_mj.transfer.features import RBF, Features, LinearFeatures, OneHot, make_features
 from tatl_mj.transfer.fqi import (
-    ExtraTreesRegressor,
+    ExtraTrees,
     LinearQ,
     LinearRegressor,
     QFunction,
@@ -27,7 +27,7 @@ __all__ = [
     "AffineMapping",
     "Apprentice",
     "DiscreteTATLPolicy",
-    "ExtraTreesRegressor",
+    "ExtraTrees",
     "Features",
     "IdentityMapping",
     "LinearAlignment",

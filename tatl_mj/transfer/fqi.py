@@ -17,7 +17,7 @@ Two regressors are provided:
   passes over precomputed features and a few triangular solves; when next states
   repeat (a grid), an iteration runs on the empirical model instead, which for one-hot
   features is Q-iteration on the counted model (same weights up to rounding);
-- :class:`ExtraTreesRegressor`: scikit-learn's extremely randomised trees on the input
+- :class:`ExtraTrees`: scikit-learn's extremely randomised trees on the input
   ``(s, a)`` as in Ernst et al. (50 trees, min_samples_split 5, min_samples_leaf 2).
 
 :func:`q_iteration` is exact value iteration over a known deterministic tabular model
@@ -82,7 +82,7 @@ class LinearRegressor:
 
 
 @dataclasses.dataclass(frozen=True)
-class ExtraTreesRegressor:
+class ExtraTrees:
     """Extremely randomised trees on ``(s, a)`` (Ernst et al. 2005), via scikit-learn.
 
     ``seed`` fixes the trees' randomness; when None, :func:`fitted_q_iteration`
@@ -96,10 +96,10 @@ class ExtraTreesRegressor:
 
     def __post_init__(self) -> None:
         for name, least in (("n_estimators", 1), ("min_samples_split", 2), ("min_samples_leaf", 1)):
-            integer("ExtraTreesRegressor", name, getattr(self, name), least)
+            integer("ExtraTrees", name, getattr(self, name), least)
 
 
-Regressor = LinearRegressor | ExtraTreesRegressor
+Regressor = LinearRegressor | ExtraTrees
 REGRESSOR_KINDS = ("linear", "extra_trees")
 
 
@@ -132,7 +132,7 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
             raise ValueError("linear regressor spec lacks 'features'")
         return LinearRegressor(make_features(spec["features"], state_dim), float(spec.get("ridge", 1e-6)))
     kwargs = {k: v for k, v in spec.items() if k not in ("kind", "features")}
-    return ExtraTreesRegressor(**kwargs)
+    return ExtraTrees(**kwargs)
 
 
 # --- Fitted Q-functions -------------------------------------------------------
@@ -252,13 +252,13 @@ def fitted_q_iteration(
     q0 = initial_q if initial_q is not None else ZeroQ(int(n_actions))
     if isinstance(regressor, LinearRegressor):
         return _fqi_linear(transitions, int(n_actions), regressor, gamma, int(iterations), q0, prior_q)
-    if isinstance(regressor, ExtraTreesRegressor):
+    if isinstance(regressor, ExtraTrees):
         if regressor.seed is not None:
             seed = int(regressor.seed)
         else:
             seed = int(rng.integers(2**31 - 1)) if rng is not None else 0
         return _fqi_trees(transitions, int(n_actions), regressor, gamma, int(iterations), q0, seed, prior_q)
-    raise ValueError(f"regressor must be a LinearRegressor or ExtraTreesRegressor, got {type(regressor).__name__}")
+    raise ValueError(f"regressor must be a LinearRegressor or ExtraTrees, got {type(regressor).__name__}")
 
 
 def _unique_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -420,7 +420,7 @@ def _iterate_on_model(
 def _fqi_trees(
     t: Transitions,
     n_actions: int,
-    reg: ExtraTreesRegressor,
+    reg: ExtraTrees,
     gamma: float,
     iterations: int,
     q0: QFunction,
@@ -559,7 +559,7 @@ def q_iteration(
 
 
 __all__ = [
-    "ExtraTreesRegressor",
+    "ExtraTrees",
     "LinearQ",
     "LinearRegressor",
     "QFunction",
