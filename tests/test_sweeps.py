@@ -81,3 +81,32 @@ def test_the_credit_of_a_method_against_itself_sits_at_one_half():
     table = plot.credit_table("toy", cells)
     assert table.splitlines()[2] == "| gain | `m` > `m-copy` |"
     assert table.splitlines()[4].startswith("| 0.5 | 0.50 [") and table.splitlines()[4].endswith("not credited |")
+
+
+@pytest.mark.parametrize("two", [False, True], ids=["one-parameter", "two-parameters"])
+def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, monkeypatch, two):
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
+    )
+
+    def exp(p):
+        pair = {"value": p, "low": p - 0.1, "high": p + 0.1}
+        return {
+            "ablations": [{"method": "m", "ablation": "a", "probability_of_improvement": pair, "verdict": "x"}],
+            "methods": {"m": {"final_iqm": {"value": 0.5, "low": 0.4, "high": 0.6}}},
+        }
+
+    conditions = [{"g": 1, "s": 2}, {"g": 1, "s": 3}] if two else [{"g": 1}, {"g": 2}]
+    plot.credit_map("toy", [(c, exp(p)) for c, p in zip(conditions, (0.3, 0.8))], tmp_path / "c.png")
+    (fig,) = drawn
+    left = fig.axes[0]
+    if two:  # a heat map: each cell says its value and interval
+        assert sorted(t.get_text() for t in left.texts) == ["0.30\n[0.20, 0.40]", "0.80\n[0.70, 0.90]"]
+    else:  # curves with error bars at each swept value
+        (line,) = [ln for ln in left.get_lines() if len(ln.get_xdata()) == 2 and ln.get_linestyle() == "-"]
+        assert list(line.get_ydata()) == [0.3, 0.8]
+    assert (tmp_path / "c.png").exists()

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import textwrap
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -895,6 +895,37 @@ def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
     return "\n".join(lines + [""])
 
 
+def _heat_map(
+    fig: Any,
+    ax: Any,
+    cells: list[tuple[dict, dict]],
+    params: list[str],
+    estimate_of: Callable[[dict], tuple[float, float, float] | None],
+    cmap: str,
+    limits: tuple[float | None, float | None],
+) -> None:
+    """One estimate per condition of a two-parameter sweep: colour by its value, its
+    interval written in the cell."""
+    first, second = ([c[k] for c, _ in cells] for k in params)
+    rows, cols = sorted(set(first), key=first.index), sorted(set(second), key=second.index)
+    grid = np.full((len(rows), len(cols)), np.nan)
+    text = {}
+    for condition, exp in cells:
+        r, c = rows.index(condition[params[0]]), cols.index(condition[params[1]])
+        found = estimate_of(exp)
+        if found is not None and not np.isnan(found[0]):
+            grid[r, c] = found[0]
+            text[r, c] = f"{found[0]:.2f}\n[{found[1]:.2f}, {found[2]:.2f}]"
+    image = ax.imshow(grid, cmap=cmap, vmin=limits[0], vmax=limits[1], aspect="auto")
+    for (r, c), _ in np.ndenumerate(grid):
+        ax.text(c, r, text.get((r, c), "n/a"), ha="center", va="center", fontsize=8)
+    ax.set_xticks(range(len(cols)), [str(v) for v in cols])
+    ax.set_yticks(range(len(rows)), [str(v) for v in rows])
+    ax.set_xlabel(params[1])
+    ax.set_ylabel(params[0])
+    fig.colorbar(image, ax=ax)
+
+
 def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> Path:
     """For one sweep: (left) P(method > its ablation or placebo) with its 95% interval over the
     swept parameter (curves; a heat map of the first pair for two parameters); (right) each
@@ -942,28 +973,14 @@ def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> P
         ax_p.set_ylim(-0.02, 1.02)
         ax_s.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
     else:
-        first, second = ([c[k] for c, _ in cells] for k in params)
-        rows, cols = sorted(set(first), key=first.index), sorted(set(second), key=second.index)
-        for ax, value_of, title in (
-            (ax_p, lambda exp: estimate(exp, pairs[0])[0] if pairs else np.nan, "P"),
-            (ax_s, lambda exp: final(exp, methods[0])[0] if methods else np.nan, "IQM"),
-        ):
-            grid = np.full((len(rows), len(cols)), np.nan)
-            for c, exp in cells:
-                grid[rows.index(c[params[0]]), cols.index(c[params[1]])] = value_of(exp)
-            image = ax.imshow(grid, cmap="RdBu" if title == "P" else "viridis", vmin=0 if title == "P" else None,
-                              vmax=1 if title == "P" else None, aspect="auto")  # fmt: skip
-            for (r, c), v in np.ndenumerate(grid):
-                ax.text(c, r, "n/a" if np.isnan(v) else f"{v:.2f}", ha="center", va="center", fontsize=8)
-            ax.set_xticks(range(len(cols)), [str(v) for v in cols])
-            ax.set_yticks(range(len(rows)), [str(v) for v in rows])
-            ax.set_xlabel(params[1])
-            ax.set_ylabel(params[0])
-            fig.colorbar(image, ax=ax)
+        focus_method = pairs[0][1] if pairs else (methods[0] if methods else "")
+        _heat_map(fig, ax_p, cells, params, lambda exp: estimate(exp, pairs[0]) if pairs else None, "RdBu", (0, 1))
+        _heat_map(fig, ax_s, cells, params, lambda exp: final(exp, focus_method), "viridis", (None, None))
     pair_text = f"{pairs[0][1]} > {pairs[0][2]}" if pairs and len(params) == 2 else "method > its ablation or placebo"
     ax_p.set_title(f"(a) P({pair_text}) on the area under the curve, 95% CI", fontsize=10)
-    focus = f" of {methods[0]}" if methods and len(params) == 2 else ""
-    ax_s.set_title(f"(b) normalised final score{focus}: IQM over seeds, 95% band", fontsize=10)
+    focus = f" of {pairs[0][1] if pairs else methods[0]}" if methods and len(params) == 2 else ""
+    spread = "95% CI" if len(params) == 2 else "95% band"
+    ax_s.set_title(f"(b) normalised final score{focus}: IQM over seeds, {spread}", fontsize=10)
     fig.suptitle(f"Where transfer is credited: {name}", fontsize=11)
     fig.tight_layout()
     path = Path(path)
