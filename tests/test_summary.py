@@ -116,6 +116,9 @@ def test_ablation_pairs_follow_built_ins_and_variants():
         ("ta-tl-h-no-cart", "apprentice-upright"),
     ]
     assert summary.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
+    # A placebo variant is an ablation itself, judged against its trained method only.
+    placebo = {"ta-tl-h-placebo": {"method": "ta-tl-h", "horizon": 20, "source": "placebo"}}
+    assert summary.ablation_pairs({**methods, **placebo}) == summary.ablation_pairs(methods)
 
 
 def _with_counts(exp: dict) -> dict:

@@ -219,6 +219,8 @@ def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
     bases = {name: base(name) for name in spec_methods}
     pairs = []
     for name, b in bases.items():
+        if (spec_methods.get(name) or {}).get("source") == "placebo":
+            continue  # a placebo is itself an ablation, judged against its trained method
         for wanted in registry.ABLATION_OF.get(b or "", ()):
             found = [other for other, ob in bases.items() if ob == wanted]
             if found:
