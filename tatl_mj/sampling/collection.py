@@ -12,9 +12,10 @@ steps in one ``Batch.rollout`` call, and an episode that ends in it idles to
 the call's end (how many steps a call takes is a speed choice,
 :func:`schedule.call_length`).
 
-Tasks stepped through their environment run a plain loop over it
-(:func:`_collect_env`); a task with a known table steps the table
-(:func:`_collect_table`).
+Tasks stepped through their environment run one plain loop over it
+(:func:`_environment_loop`), which :func:`policy_transitions` runs on a given
+environment; a task with a known table looks its steps up in a copy of that
+loop (:func:`_collect_table`).
 """
 
 from __future__ import annotations
@@ -301,11 +302,32 @@ def _collect_env(
     policy: IndexPolicy | None,
     max_episode_steps: int | None,
 ) -> Transitions:
-    """A plain loop over one environment (time-varying models, tasks without physics);
-    random actions from ``np.random.default_rng(seed)``."""
-    env = sim.make_env(seed)
-    rng = np.random.default_rng(seed)
-    n_actions = len(sim.actions)
+    """collect() through one environment (time-varying models, tasks without physics);
+    random actions from ``np.random.default_rng(seed)``, one a step."""
+    if policy is None:
+        rng, n_actions = np.random.default_rng(seed), len(sim.actions)
+        choose = lambda state: int(rng.integers(n_actions))  # noqa: E731
+    else:
+        choose = _policy_choice(policy, len(sim.actions))
+    transitions = _environment_loop(sim.make_env(seed), sim.actions, n, choose, max_episode_steps)
+    SUBSTEPS[sim.key] += n * sim.substeps
+    return transitions
+
+
+def _policy_choice(policy: IndexPolicy, n_actions: int) -> Callable[[np.ndarray], int]:
+    """The action index ``policy`` takes in one state, checked."""
+    return lambda state: int(check_indices(policy(state[None]), 1, n_actions)[0])
+
+
+def _environment_loop(
+    env: dm_env.Environment,
+    actions: np.ndarray,
+    n: int,
+    choose: Callable[[np.ndarray], int],
+    max_episode_steps: int | None,
+) -> Transitions:
+    """``n`` transitions of ``env``, episode after episode from its resets, taking
+    ``actions[choose(state)]``; the last episode is cut at ``n``."""
     state = observed_state(env.reset())
     d = len(state)
     out = {
@@ -322,11 +344,8 @@ def _collect_env(
             state = observed_state(env.reset())
         steps = 0
         while i < n:
-            if policy is None:
-                a = int(rng.integers(n_actions))
-            else:
-                a = int(check_indices(policy(state[None]), 1, n_actions)[0])
-            timestep = env.step(sim.actions[a])
+            a = choose(state)
+            timestep = env.step(actions[a])
             steps += 1
             next_state = observed_state(timestep)
             out["states"][i], out["actions"][i], out["next_states"][i] = state, a, next_state
@@ -338,7 +357,6 @@ def _collect_env(
                 break
             state = next_state
     out["last"][-1] = True
-    SUBSTEPS[sim.key] += n * sim.substeps
     return Transitions(**out)
 
 
@@ -409,26 +427,4 @@ def policy_transitions(
     n = integer("", "n", n, 1)
     if max_episode_steps is not None:
         integer("", "max_episode_steps", max_episode_steps, 1)
-    rows: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "next_states", "absorbing", "last")}
-    while len(rows["states"]) < n:
-        timestep = env.reset()
-        state, steps = observed_state(timestep), 0
-        while len(rows["states"]) < n:
-            index = check_indices(policy(state[None]), 1, len(actions))[0]
-            timestep = env.step(actions[index])
-            steps += 1
-            next_state = observed_state(timestep)
-            last = timestep.last() or steps == max_episode_steps or len(rows["states"]) + 1 == n
-            for key, value in (
-                ("states", state),
-                ("actions", index),
-                ("rewards", timestep.reward),
-                ("next_states", next_state),
-                ("last", last),
-                ("absorbing", timestep.last() and timestep.discount == 0.0),
-            ):
-                rows[key].append(value)
-            if last:
-                break
-            state = next_state
-    return Transitions(**{k: np.asarray(v) for k, v in rows.items()})
+    return _environment_loop(env, actions, n, _policy_choice(policy, len(actions)), max_episode_steps)
