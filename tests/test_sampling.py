@@ -181,17 +181,24 @@ def test_random_collections_depend_on_the_seed_alone(domain, task, n, kwargs, mo
     assert_same_transitions(many, one)
 
 
-def test_default_parallelism_grows_with_the_collection_and_leaves_the_data_alone(monkeypatch):
-    assert schedule.default_parallel(1_000, True) == sampling.DEFAULT_PARALLEL == 256
-    assert schedule.default_parallel(64 * 1_000, True) == 1_000
-    assert schedule.default_parallel(10**7, True) == 2_048
-    assert schedule.default_parallel(10**7, False) == 256  # a policy's noise order stays
+def test_default_parallelism_leaves_the_data_alone(monkeypatch):
     sizes = []
     real = simulator.Simulator.new_batch
     monkeypatch.setattr(simulator.Simulator, "new_batch", lambda self, nsim: sizes.append(nsim) or real(self, nsim))
     default = sampling.collect("cartpole", "balance", 24_000, seed=3)
     assert_same_transitions(default, sampling.collect("cartpole", "balance", 24_000, seed=3, n_parallel=256))
-    assert sizes == [375, 256]
+    assert sizes == [schedule.default_parallel(24_000, random_actions=True), 256]  # collect() took the default
+
+
+def test_random_collections_do_not_depend_on_the_schedule(monkeypatch):
+    # How many episodes start and how many steps each call takes are speed choices:
+    # any lengths within the call's bounds, and starting every free slot at once,
+    # give the same transitions.
+    want = sampling.collect("mountain_car", "climb", 2500, seed=8, max_episode_steps=120)
+    rng = np.random.default_rng(0)
+    monkeypatch.setattr(schedule, "call_length", lambda ended, ages, caps, cost, most: int(rng.integers(1, most + 1)))
+    monkeypatch.setattr(schedule, "episodes_to_start", lambda n_free, total, n, *_: n_free if total < n else 0)
+    assert_same_transitions(want, sampling.collect("mountain_car", "climb", 2500, seed=8, max_episode_steps=120))
 
 
 def test_random_collections_start_from_the_lengths_of_earlier_ones(monkeypatch):
@@ -653,25 +660,6 @@ def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch)
     assert "pendulum          sampler" in out and "Gymnasium's loop" not in out
 
 
-def test_expected_lengths_count_running_episodes_as_censored():
-    """Kaplan-Meier by hand: one episode ended at 90, seven still run at age 90. S = 7/8 on
-    [90, 180) (survivors assumed to go on to twice the longest seen), so a new episode is
-    expected to last 90 + 90 * 7/8 = 168.75 steps, and each survivor 90 more; the mean of
-    the ended lengths alone would say 90. Ended lengths come as a histogram (how many
-    ended after k steps)."""
-    expected, remaining = schedule.expected_remaining(np.bincount([90]), np.full(7, 90), limit=100_000.0)
-    assert expected == pytest.approx(168.75)
-    np.testing.assert_allclose(remaining, 90.0)
-    # Running ages come back in their own order; the limit caps the tail.
-    expected, remaining = schedule.expected_remaining(np.bincount([10, 30]), np.array([20, 0]), limit=40.0)
-    # S: 1 on [0, 10), 2/3 on [10, 30) (at risk at 10: ended 10, 30 and age 20), 0 from 30 on
-    # (at risk at 30: the ended 30 alone); the tail [30, 40) adds nothing.
-    assert expected == pytest.approx(10 + 20 * 2 / 3)
-    np.testing.assert_allclose(remaining, [(20 * 2 / 3 - 10 * 2 / 3) / (2 / 3), 10 + 20 * 2 / 3])
-    # Before any episode ends: the limit.
-    assert schedule.expected_remaining(np.zeros(8, np.int64), np.array([3]), 50.0)[0] == 50.0
-
-
 def test_transitions_save_and_load_round_trip(tmp_path):
     tr = sampling.collect("pendulum", "swingup", 250, seed=2)
     tr.save(str(tmp_path / "t.npz"))
@@ -730,33 +718,6 @@ def test_controls_draw_row_after_row(domain, task):
     random = np.random.RandomState(4)
     parts = np.concatenate([env.task.controls(values[i : i + 5], random) for i in range(0, 12, 5)])
     np.testing.assert_array_equal(whole, parts)
-
-
-def test_steps_to_cover_counts_the_live_episodes_before_each():
-    # Episodes of 5, 3 and 2 steps, the last two running: after j more steps
-    # episode 1 holds 5 + 3 + j and episode 2 holds 5 + 3 + 2 + 2j transitions.
-    episodes = schedule.Episodes(20)
-    for length in (5, 3, 2):
-        episodes.lengths[episodes.start(1)] = length
-    np.testing.assert_array_equal(schedule.steps_to_cover(np.array([1, 2]), episodes, 20), [12, 5])
-    np.testing.assert_array_equal(schedule.steps_to_cover(np.array([1, 2]), episodes, 21), [13, 6])
-
-
-def test_calls_reach_to_the_episodes_ends_and_no_further():
-    # Every ended episode was 10 steps long: a call is worth making until the live
-    # episodes end at step 10, never past it, and never past what is needed (caps).
-    ended = np.bincount(np.full(50, 10))
-    length = schedule.call_length
-    assert length(ended, np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 10
-    assert length(ended, np.full(20, 6), np.full(20, 100.0), 20.0, 64) == 4
-    assert length(ended, np.zeros(20, np.int64), np.full(20, 3.0), 20.0, 64) == 3
-    # Before any episode ends, no further than the oldest has gone (at least 1).
-    assert length(np.zeros(64, np.int64), np.full(20, 2), np.full(20, 100.0), 20.0, 64) == 2
-    assert length(np.zeros(64, np.int64), np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 1
-    # Half end at 2 steps and half at 40: long calls idle half the simulations, but
-    # a call costing nothing extra is then worth one step at a time (no idling).
-    mixed = np.bincount(np.r_[np.full(50, 2), np.full(50, 40)])
-    assert length(mixed, np.ones(20, np.int64), np.full(20, 100.0), 0.0, 64) == 1
 
 
 GRID, RANDOM_START = ("gridworld", "windy"), {"random_start": True}
