@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tatl_mj import sampling, suite
+from tatl_mj.sampling import collection, schedule, simulator
 
 # Rider noise: collect() draws it from each episode's own blocks, the environment
 # from its task's random; with zero noise nothing is drawn and both agree.
@@ -88,11 +89,11 @@ def test_rider_noise_is_each_episodes_own():
     seed, n = 4, 700
     tr = sampling.collect("bicycle", "balance", n, seed=seed)
     assert tr.last.sum() >= 3
-    sim = sampling._simulator("bicycle", "balance", None, 2)
+    sim = simulator.simulator_for("bicycle", "balance", None, 2)
     env = suite.load("bicycle", "balance", task_kwargs={"random": seed})
     # The draws' own task: the environment's controls are replaced below.
     task = suite.load("bicycle", "balance", task_kwargs={"random": seed}).task
-    draws = sampling._EpisodeDraws(sim, task, seed, 1, sim.step_limit(None))
+    draws = collection.EpisodeDraws(sim, task, seed, 1, sim.step_limit(None))
     slot, episode, steps = np.zeros(1, np.int64), 0, 0
     rows = []
 
@@ -124,7 +125,7 @@ def test_an_episodes_draws_are_its_blocks():
     # Known answer: episode e's first block is row e of default_rng(seed)'s draws,
     # its block j after that default_rng([seed, e, j])'s. Mountain car's random
     # episodes run to the time limit (~400 steps), past the first block.
-    seed, block = 3, sampling._BLOCK
+    seed, block = 3, collection.BLOCK
     tr = sampling.collect("mountain_car", "climb", 1200, seed=seed, n_parallel=2)
     episodes = np.split(tr.actions, np.flatnonzero(tr.last)[:-1] + 1)
     assert len(episodes) == 3 and block < len(episodes[0]) <= 2 * block
@@ -162,50 +163,57 @@ def test_random_collections_depend_on_the_seed_alone(domain, task, n, kwargs, mo
     # Not on how many episodes run together nor how many steps a call takes: the
     # multi-step calls, the one-step passes and one episode at a time agree.
     calls = []
-    real = sampling._Simulator.advance_steps
+    real = simulator.Simulator.advance_steps
 
     def counting(self, batch, ids, controls):
         calls.append(controls.shape[:2])
         return real(self, batch, ids, controls)
 
-    monkeypatch.setattr(sampling._Simulator, "advance_steps", counting)
+    monkeypatch.setattr(simulator.Simulator, "advance_steps", counting)
     many = sampling.collect(domain, task, n, seed=7, **kwargs)
     assert calls and max(k for k, _ in calls) > 1  # the multi-step path ran
     for parallel in (1, 5):
         assert_same_transitions(many, sampling.collect(domain, task, n, seed=7, n_parallel=parallel, **kwargs))
-    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)  # one control step per pass
+    monkeypatch.setattr(schedule, "MOST_STEPS", 1)  # one control step per pass
     calls.clear()
     one = sampling.collect(domain, task, n, seed=7, **kwargs)
     assert not calls
     assert_same_transitions(many, one)
 
 
-def test_default_parallelism_grows_with_the_collection_and_leaves_the_data_alone(monkeypatch):
-    assert sampling._parallel(1_000, None) == sampling.DEFAULT_PARALLEL == 256
-    assert sampling._parallel(64 * 1_000, None) == 1_000
-    assert sampling._parallel(10**7, None) == 2_048
-    assert sampling._parallel(10**7, lambda s: np.zeros(len(s), np.int64)) == 256  # a policy's noise order stays
+def test_default_parallelism_leaves_the_data_alone(monkeypatch):
     sizes = []
-    real = sampling._Simulator.new_batch
-    monkeypatch.setattr(sampling._Simulator, "new_batch", lambda self, nsim: sizes.append(nsim) or real(self, nsim))
+    real = simulator.Simulator.new_batch
+    monkeypatch.setattr(simulator.Simulator, "new_batch", lambda self, nsim: sizes.append(nsim) or real(self, nsim))
     default = sampling.collect("cartpole", "balance", 24_000, seed=3)
     assert_same_transitions(default, sampling.collect("cartpole", "balance", 24_000, seed=3, n_parallel=256))
-    assert sizes == [375, 256]
+    assert sizes == [schedule.default_parallel(24_000, random_actions=True), 256]  # collect() took the default
+
+
+def test_random_collections_do_not_depend_on_the_schedule(monkeypatch):
+    # How many episodes start and how many steps each call takes are speed choices:
+    # any lengths within the call's bounds, and starting every free slot at once,
+    # give the same transitions.
+    want = sampling.collect("mountain_car", "climb", 2500, seed=8, max_episode_steps=120)
+    rng = np.random.default_rng(0)
+    monkeypatch.setattr(schedule, "call_length", lambda ended, ages, caps, cost, most: int(rng.integers(1, most + 1)))
+    monkeypatch.setattr(schedule, "episodes_to_start", lambda n_free, total, n, *_: n_free if total < n else 0)
+    assert_same_transitions(want, sampling.collect("mountain_car", "climb", 2500, seed=8, max_episode_steps=120))
 
 
 def test_random_collections_start_from_the_lengths_of_earlier_ones(monkeypatch):
     # A speed choice only: a warm start changes how the episodes are stepped, not the data.
-    sim = sampling._simulator("bicycle", "balance", None, 2)
+    sim = simulator.simulator_for("bicycle", "balance", None, 2)
     limit = sim.step_limit(None)
     sim.random_lengths.clear()
     first_calls = []
-    real = sampling._Simulator.advance_steps
+    real = simulator.Simulator.advance_steps
 
     def recording(self, batch, ids, controls):
         first_calls.append(len(controls))
         return real(self, batch, ids, controls)
 
-    monkeypatch.setattr(sampling._Simulator, "advance_steps", recording)
+    monkeypatch.setattr(simulator.Simulator, "advance_steps", recording)
     cold = sampling.collect("bicycle", "balance", 3000, seed=4)
     seen = sim.random_lengths[limit].copy()
     # Every episode that fell within the collection is in the histogram (some beyond it too).
@@ -321,11 +329,13 @@ def test_bound_views_do_not_keep_batches_alive():
     # must not hold them (or their memory) after the call.
     import gc
 
-    sim = sampling._simulator("cartpole", "balance", None, 2)
+    sim = simulator.simulator_for("cartpole", "balance", None, 2)
+    gc.collect()
+    cached = len(sim.views)  # the query batches', if any
     for _ in range(3):
         sampling.collect("cartpole", "balance", 200, seed=1)
     gc.collect()
-    assert list(sim._views.keys()) in ([], [sim._batch])
+    assert len(sim.views) == cached
 
 
 def test_closed_loop_policy_balances_longer_than_random():
@@ -375,12 +385,12 @@ def test_a_diverging_first_substep_is_reported():
     # The bicycle (implicitfast) replays dm_control's first substep after a reset
     # through its hooks; a warning there must end the episode like any other.
     states = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 2e10, 0.0, 0.0]])
-    sim = sampling._simulator("bicycle", "balance", None, 2)
+    sim = simulator.simulator_for("bicycle", "balance", None, 2)
     assert sim.legacy_first
     batch = sim.new_batch(2)
     sim.place(batch, np.arange(2), *sim.physics.qpos_qvel_from(states))
-    assert not sim._first_substep(batch.state[0])
-    assert sim._first_substep(batch.state[1])
+    assert not sim.first_substep(batch.state[0])
+    assert sim.first_substep(batch.state[1])
     got = sampling.step_from("bicycle", "balance", states, np.array([1, 1]))
     np.testing.assert_array_equal(got[1], states[1])
     assert np.all(np.isfinite(got)) and not np.array_equal(got[0], states[0])
@@ -458,7 +468,7 @@ def test_evaluation_rider_noise_is_each_episodes_own(monkeypatch):
     # Common random numbers: two policies evaluated with one seed give every episode
     # the same rider noise at every step both are alive, though their episodes end at
     # different times; known answer, episode i's stream is child i of
-    # SeedSequence(seed)'s second child (sampling._evaluation_randoms).
+    # SeedSequence(seed)'s second child (evaluation.evaluation_randoms).
     seed, n, cg_noise = 3, 6, suite.bicycle.DEFAULT_CG_NOISE
     _, weak, weak_noise = evaluated_noise(monkeypatch, steer_into_lean(4.0), n, seed, 300)
     _, strong, strong_noise = evaluated_noise(monkeypatch, steer_into_lean(12.0), n, seed, 300)
@@ -650,25 +660,6 @@ def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch)
     assert "pendulum          sampler" in out and "Gymnasium's loop" not in out
 
 
-def test_expected_lengths_count_running_episodes_as_censored():
-    """Kaplan-Meier by hand: one episode ended at 90, seven still run at age 90. S = 7/8 on
-    [90, 180) (survivors assumed to go on to twice the longest seen), so a new episode is
-    expected to last 90 + 90 * 7/8 = 168.75 steps, and each survivor 90 more; the mean of
-    the ended lengths alone would say 90. Ended lengths come as a histogram (how many
-    ended after k steps)."""
-    expected, remaining = sampling._expected_remaining(np.bincount([90]), np.full(7, 90), limit=100_000.0)
-    assert expected == pytest.approx(168.75)
-    np.testing.assert_allclose(remaining, 90.0)
-    # Running ages come back in their own order; the limit caps the tail.
-    expected, remaining = sampling._expected_remaining(np.bincount([10, 30]), np.array([20, 0]), limit=40.0)
-    # S: 1 on [0, 10), 2/3 on [10, 30) (at risk at 10: ended 10, 30 and age 20), 0 from 30 on
-    # (at risk at 30: the ended 30 alone); the tail [30, 40) adds nothing.
-    assert expected == pytest.approx(10 + 20 * 2 / 3)
-    np.testing.assert_allclose(remaining, [(20 * 2 / 3 - 10 * 2 / 3) / (2 / 3), 10 + 20 * 2 / 3])
-    # Before any episode ends: the limit.
-    assert sampling._expected_remaining(np.zeros(8, np.int64), np.array([3]), 50.0)[0] == 50.0
-
-
 def test_transitions_save_and_load_round_trip(tmp_path):
     tr = sampling.collect("pendulum", "swingup", 250, seed=2)
     tr.save(str(tmp_path / "t.npz"))
@@ -690,15 +681,15 @@ def test_steps_refused_by_mujoco_are_stepped_one_at_a_time(monkeypatch):
         refused.append(len(controls))
         return None
 
-    monkeypatch.setattr(sampling._Simulator, "advance_steps", refuse)
+    monkeypatch.setattr(simulator.Simulator, "advance_steps", refuse)
     got = sampling.collect("bicycle", "balance", 800, seed=3)
     assert refused
-    monkeypatch.setattr(sampling, "_MOST_STEPS", 1)
+    monkeypatch.setattr(schedule, "MOST_STEPS", 1)
     assert_same_transitions(got, sampling.collect("bicycle", "balance", 800, seed=3))
 
 
 def test_advance_steps_gives_up_on_a_diverging_simulation():
-    sim = sampling._simulator("cartpole", "balance", None, 2)
+    sim = simulator.simulator_for("cartpole", "balance", None, 2)
     batch = sim.new_batch(2)
     ids = np.arange(2)
     sim.place(batch, ids, *sim.physics.qpos_qvel_from(np.array([[0.0, 0.0, 0.1, 0.0], [0.0, 2e10, 0.0, 0.0]])))
@@ -729,31 +720,7 @@ def test_controls_draw_row_after_row(domain, task):
     np.testing.assert_array_equal(whole, parts)
 
 
-def test_steps_to_cover_counts_the_live_episodes_before_each():
-    # Episodes of 5, 3 and 2 steps, the last two running: after j more steps
-    # episode 1 holds 5 + 3 + j and episode 2 holds 5 + 3 + 2 + 2j transitions.
-    episodes = sampling._Episodes(20)
-    for length in (5, 3, 2):
-        episodes.lengths[episodes.start(1)] = length
-    np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 20), [12, 5])
-    np.testing.assert_array_equal(sampling._steps_to_cover(np.array([1, 2]), episodes, 21), [13, 6])
-
-
-def test_calls_reach_to_the_episodes_ends_and_no_further():
-    # Every ended episode was 10 steps long: a call is worth making until the live
-    # episodes end at step 10, never past it, and never past what is needed (caps).
-    ended = np.bincount(np.full(50, 10))
-    length = sampling._call_length
-    assert length(ended, np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 10
-    assert length(ended, np.full(20, 6), np.full(20, 100.0), 20.0, 64) == 4
-    assert length(ended, np.zeros(20, np.int64), np.full(20, 3.0), 20.0, 64) == 3
-    # Before any episode ends, no further than the oldest has gone (at least 1).
-    assert length(np.zeros(64, np.int64), np.full(20, 2), np.full(20, 100.0), 20.0, 64) == 2
-    assert length(np.zeros(64, np.int64), np.zeros(20, np.int64), np.full(20, 100.0), 20.0, 64) == 1
-    # Half end at 2 steps and half at 40: long calls idle half the simulations, but
-    # a call costing nothing extra is then worth one step at a time (no idling).
-    mixed = np.bincount(np.r_[np.full(50, 2), np.full(50, 40)])
-    assert length(mixed, np.ones(20, np.int64), np.full(20, 100.0), 0.0, 64) == 1
+GRID, RANDOM_START = ("gridworld", "windy"), {"random_start": True}
 
 
 @pytest.mark.parametrize("max_episode_steps", [None, 7, 150])
@@ -761,7 +728,7 @@ def test_the_grid_loops_on_its_known_table_equal_stepping_its_environment(max_ep
     # collect() and evaluate() look the grid's steps up in its known model; the
     # environment loops they replace must give the same numbers, random starts,
     # random actions and a policy drawing its own exploration included.
-    sim = sampling._simulator("gridworld", "windy", {"random_start": True}, 2)
+    sim = simulator.simulator_for(*GRID, RANDOM_START, 2)
     assert sim.table is not None
 
     def explorer(seed):
@@ -773,24 +740,27 @@ def test_the_grid_loops_on_its_known_table_equal_stepping_its_environment(max_ep
 
         return policy
 
+    def both(fn, explore, **kwargs):  # (on the table, stepping the environment)
+        def once():
+            policy = {"policy": explorer(kwargs["seed"])} if explore else {}
+            return fn(*GRID, **kwargs, **policy, task_kwargs=RANDOM_START, max_episode_steps=max_episode_steps)
+
+        on_table = once()
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(sim, "table", None)
+            return on_table, once()
+
     for seed in (0, 3):
         pairs = [
-            (
-                sampling._collect_table(sim, 3000, seed, None, max_episode_steps),
-                sampling._collect_env(sim, 3000, seed, None, max_episode_steps),
-            ),
-            (
-                sampling._collect_table(sim, 2000, seed, explorer(seed), max_episode_steps),
-                sampling._collect_env(sim, 2000, seed, explorer(seed), max_episode_steps),
-            ),
+            both(sampling.collect, False, n_transitions=3000, seed=seed),
+            both(sampling.collect, True, n_transitions=2000, seed=seed),
         ]
         for table, stepped in pairs:
             for field in ("states", "actions", "rewards", "next_states", "absorbing", "last"):
                 got, want = getattr(table, field), getattr(stepped, field)
                 assert got.dtype == want.dtype
                 np.testing.assert_array_equal(got, want)
-        table = sampling._evaluate_table(sim, explorer(seed), 20, seed, max_episode_steps)
-        stepped = sampling._evaluate_env(sim, explorer(seed), 20, seed, max_episode_steps)
+        table, stepped = both(sampling.evaluate, True, n_episodes=20, seed=seed)
         for got, want in zip(table, stepped):
             assert got.dtype == want.dtype
             np.testing.assert_array_equal(got, want)
