@@ -65,6 +65,9 @@ class TaskDescription:
         episode's steps says how steadily a policy holds the task (the bicycle's
         roll); with them the evaluation also reports the mean absolute actuator
         value. Where episodes reach their cap, returns saturate and these do not.
+      falls: an episode that ends before its cap has failed (the bicycle or the
+        cart-pole fell), so survival to the cap says how well a policy holds it;
+        False where an early end is a success (the grid world's goal) or none occurs.
     """
 
     domain: str
@@ -86,6 +89,7 @@ class TaskDescription:
     transition_absorbing: Callable[[np.ndarray], np.ndarray] | None = None
     gymnasium_peer: str | None = None
     steadiness: tuple[str, ...] = ()
+    falls: bool = False
 
     def __post_init__(self) -> None:
         d = len(self.state_names)

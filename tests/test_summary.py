@@ -184,3 +184,13 @@ def test_stopping_rule_notes_are_one_line_per_experiment_with_their_meaning():
     lines = summary.notes({"experiments": {"flip": exp, "other": experiment({"rl": {0: [1.0, 1.0]}}, {0: 0.0})}})
     assert len(lines) == 1 and lines[0].startswith("note: flip: Algorithm 2's stopping rule")
     assert "ta-tl on 1 of 2 seeds" in lines[0] and "not an error" in lines[0]
+
+
+def test_survival_is_reported_only_where_an_early_end_is_a_fall():
+    def spec(domain, task):
+        return {"target": {"domain": domain, "task": task, "task_kwargs": {}}}
+
+    assert summary._falls(spec("bicycle", "balance")) and summary._falls(spec("cartpole", "balance"))
+    # Reaching the grid's goal ends an episode early: a success, not a fall.
+    assert not summary._falls(spec("gridworld", "windy")) and not summary._falls(spec("pendulum", "swingup"))
+    assert not summary._falls({"target": {"domain": "no_such_domain", "task": "x"}})

@@ -459,6 +459,18 @@ def _steadiness(experiment: dict) -> None:
         }
 
 
+def _falls(spec: dict) -> bool:
+    """Whether the spec's target ends an episode early only by failing (a fall): survival
+    to the cap is then a measure of the policy (``TaskDescription.falls``)."""
+    from tatl_mj import suite
+
+    target = spec.get("target") or {}
+    try:
+        return bool(suite.describe(target["domain"], target["task"], target.get("task_kwargs") or {}).falls)
+    except (KeyError, TypeError, ValueError, suite.DomainError):
+        return False
+
+
 def _survival(experiment: dict, cap: int | None) -> None:
     """Kaplan-Meier survival of each method's evaluation episodes at its largest budget, pooled
     over the compared seeds and censored at the episode cap, where any episode ended early."""
@@ -584,7 +596,8 @@ def build(
         reference = ((spec.get("presets") or {}).get(preset) or {}).get("reference_return")
         experiment = _experiment(run_dir, spec["name"], seeds, own, reference)
         _statistics(experiment, spec)
-        _survival(experiment, ((spec.get("presets") or {}).get(preset) or {}).get("evaluation_steps"))
+        if _falls(spec):
+            _survival(experiment, ((spec.get("presets") or {}).get(preset) or {}).get("evaluation_steps"))
         _steadiness(experiment)
         experiments[spec["name"]] = {**experiment, "spec": spec}
     return {

@@ -571,4 +571,5 @@ def describe(task: str, **_: Any) -> TaskDescription:
         reset_low=np.array([-0.5, -1.5, -ROLL_LIMIT, -1.5]),
         reset_high=np.array([0.5, 1.5, ROLL_LIMIT, 1.5]),
         steadiness=("roll",),
+        falls=True,
     )

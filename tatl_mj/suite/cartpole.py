@@ -183,5 +183,6 @@ def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskD
         # The track and the pole's fall angle, with the rates the source's FQI box covers.
         reset_low=np.array([-X_LIMIT, -2.0, -THETA_LIMIT, -2.0]),
         reset_high=np.array([X_LIMIT, 2.0, THETA_LIMIT, 2.0]),
+        falls=True,
         gymnasium_peer="CartPole-v1" if task == next(iter(TASKS)) else None,
     )
