@@ -515,7 +515,7 @@ def _iqm_panel(ax: Any, experiment: dict, order: list[str], colors: dict[str, st
                               ms=6, lw=0, label=label))  # fmt: skip
     ax.set_ylim(*limits)
     ax.set_xscale("log")
-    ticks = spaced_ticks(sorted({float(v) for _, x, *_ in lines for v in x}), 0.2)
+    ticks = spaced_ticks(sorted({float(v) for _, x, *_ in lines for v in x}), 0.3)
     _label_curve_axes(
         ax,
         ticks,
@@ -593,7 +593,7 @@ def interval_figure(name: str, experiment: dict, path: str | Path) -> Path:
     height = 4.6 + 0.22 * legend_rows + 0.5 + 0.05 * max(0, pairs - 6)
     fig.set_size_inches(12, height)
     block = 0.6 + 0.22 * legend_rows + 0.4
-    fig.subplots_adjust(left=0.06, right=0.93, top=1 - 0.5 / height, bottom=block / height, wspace=0.55)
+    fig.subplots_adjust(left=0.06, right=0.89, top=1 - 0.5 / height, bottom=block / height, wspace=0.55)
     fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=7.5, frameon=False,
                bbox_to_anchor=(0.5, 0.42 / height))  # fmt: skip
     fig.text(0.06, 0.08 / height, caption, fontsize=7.5, va="bottom", ha="left")
