@@ -13,6 +13,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
@@ -65,3 +67,16 @@ def tatl(*args: str, env: dict | None = None, timeout: float = 600) -> subproces
         env={**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl", "PYTHONPATH": str(ROOT), **(env or {})},
         cwd=ROOT,
     )
+
+
+@pytest.fixture
+def drawn(monkeypatch) -> list:
+    """The matplotlib figures saved while a test runs, in order (their files are written too)."""
+    import matplotlib.figure
+
+    figures: list = []
+    save = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (figures.append(fig), save(fig, *a, **k))
+    )
+    return figures

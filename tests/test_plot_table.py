@@ -155,14 +155,7 @@ def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
 
 
 @pytest.mark.parametrize("meaningful", [True, False], ids=["threshold", "no-threshold"])
-def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, monkeypatch, meaningful):
-    import matplotlib.figure
-
-    drawn = []
-    save = matplotlib.figure.Figure.savefig
-    monkeypatch.setattr(
-        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
-    )
+def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, drawn, meaningful):
     exp = experiment({"ta-tl": [100, 1000], "rl": [None, 10000]} if meaningful else {"ta-tl": [None], "rl": [None]})
     if not meaningful:
         exp["random_returns"] = [50.0]
@@ -196,15 +189,9 @@ def interval_experiment() -> dict:
     return exp
 
 
-def test_interval_figure_draws_iqm_bands_and_the_probability_of_improvement(tmp_path, monkeypatch):
+def test_interval_figure_draws_iqm_bands_and_the_probability_of_improvement(tmp_path, drawn):
     import matplotlib.collections
-    import matplotlib.figure
 
-    drawn = []
-    save = matplotlib.figure.Figure.savefig
-    monkeypatch.setattr(
-        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
-    )
     plot.figure("toy", interval_experiment(), tmp_path / "toy.png")
     (fig,) = drawn
     curve, improvement = fig.axes

@@ -84,14 +84,7 @@ def test_the_credit_of_a_method_against_itself_sits_at_one_half():
 
 
 @pytest.mark.parametrize("two", [False, True], ids=["one-parameter", "two-parameters"])
-def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, monkeypatch, two):
-    import matplotlib.figure
-
-    drawn = []
-    save = matplotlib.figure.Figure.savefig
-    monkeypatch.setattr(
-        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (drawn.append(fig), save(fig, *a, **k))
-    )
+def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, drawn, two):
 
     def exp(p):
         pair = {"value": p, "low": p - 0.1, "high": p + 0.1}
