@@ -917,8 +917,11 @@ def _heat_map(
             grid[r, c] = found[0]
             text[r, c] = f"{found[0]:.2f}\n[{found[1]:.2f}, {found[2]:.2f}]"
     image = ax.imshow(grid, cmap=cmap, vmin=limits[0], vmax=limits[1], aspect="auto")
-    for (r, c), _ in np.ndenumerate(grid):
-        ax.text(c, r, text.get((r, c), "n/a"), ha="center", va="center", fontsize=8)
+    for (r, c), value in np.ndenumerate(grid):
+        # White on the darkest colours, black elsewhere, so every cell stays readable.
+        shade = image.cmap(image.norm(value)) if np.isfinite(value) else (1.0, 1.0, 1.0, 1.0)
+        colour = "white" if 0.299 * shade[0] + 0.587 * shade[1] + 0.114 * shade[2] < 0.45 else "black"
+        ax.text(c, r, text.get((r, c), "n/a"), ha="center", va="center", fontsize=8, color=colour)
     ax.set_xticks(range(len(cols)), [str(v) for v in cols])
     ax.set_yticks(range(len(rows)), [str(v) for v in rows])
     ax.set_xlabel(params[1])
