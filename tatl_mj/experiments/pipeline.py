@@ -609,8 +609,8 @@ def run_method(
     if transfer is None:
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     ledger = Ledger()
-    target = describe(spec.target)
     problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
+    target = problem.target
     hooks = method.contract(transfer)
     data = hooks.data
     eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method

@@ -445,9 +445,10 @@ def _steadiness(experiment: dict) -> None:
     """Per method, each steadiness measure at the largest budget: per seed the mean over its
     evaluation episodes, and the IQM over the compared seeds whose records carry it, with
     its interval, in place."""
+    compared = compare(experiment).seeds
     for data in experiment["methods"].values():
         # The compared seeds whose records carry it (older records may not: said in the table).
-        seeds = [s for s in compare(experiment).seeds if str(s) in data.get("final_steadiness", {})]
+        seeds = [s for s in compared if str(s) in data.get("final_steadiness", {})]
         per_seed = [data["final_steadiness"][str(s)] for s in seeds]
         if not seeds:
             continue
@@ -476,9 +477,10 @@ def _survival(experiment: dict, cap: int | None) -> None:
     over the compared seeds and censored at the episode cap, where any episode ended early."""
     if cap is None:
         return
+    compared = compare(experiment).seeds
     for data in experiment["methods"].values():
         # The compared seeds whose records carry episode lengths (older records may not).
-        seeds = [s for s in compare(experiment).seeds if str(s) in data.get("final_steps", {})]
+        seeds = [s for s in compared if str(s) in data.get("final_steps", {})]
         if not seeds:
             continue
         lengths = np.concatenate([np.asarray(data["final_steps"][str(s)], dtype=np.float64) for s in seeds])
