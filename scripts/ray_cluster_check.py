@@ -140,11 +140,6 @@ def stop_everything() -> list[str]:
 def environment() -> dict[str, str]:
     env = {
         **os.environ,
-        # Ray runs a one-CPU task with one BLAS thread; the local reference run does the
-        # same, since a record can depend on the BLAS thread count (Algorithm 2's stopping
-        # rule flips on the last bit of a sum: docs/protocol.md, "Across machines").
-        "OPENBLAS_NUM_THREADS": "1",
-        "OMP_NUM_THREADS": "1",
         "RAY_AUTH_MODE": "disabled",
         "RAY_USAGE_STATS_ENABLED": "0",
         # The cluster's workers import tatl_mj and the test's own domain and method from here.

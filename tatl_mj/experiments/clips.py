@@ -75,7 +75,8 @@ def render_from_spec(
     spec.preset(preset)  # an unknown preset fails here, naming the valid ones
     if method != RANDOM and method not in spec.methods:
         raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
-    return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
+    with pipeline.one_thread():  # as a unit runs: the clip shows the evaluated policy
+        return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
 
 
 def _render(

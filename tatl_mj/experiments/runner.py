@@ -98,7 +98,8 @@ def work(
     """
     start = time.perf_counter()
     try:
-        return _work(spec, preset_name, unit, source_blob, transfer, start)
+        with pipeline.one_thread():  # workers run in parallel; records must not see the core count
+            return _work(spec, preset_name, unit, source_blob, transfer, start)
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
         return {"error": traceback.format_exc()}
 
