@@ -769,3 +769,32 @@ def test_the_grid_loops_on_its_known_table_equal_stepping_its_environment(max_ep
 def test_the_grid_table_refuses_what_its_environment_refuses():
     with pytest.raises(ValueError, match="gridworld action must be one of"):
         sampling.evaluate("gridworld", "windy", lambda s: np.full(len(s), 1.5), 3, seed=0, max_episode_steps=5)
+
+
+@pytest.mark.parametrize("domain,task", [("bicycle", "balance"), ("cartpole", "balance")])
+def test_evaluate_policies_gives_each_policy_what_it_gets_alone(domain, task):
+    """One lockstep batch of three policies: each one's returns and lengths, and every state
+    it is asked about, equal its own evaluation (the bicycle's rider noise included)."""
+    column = 2 if domain == "bicycle" else 1  # roll, or the pole's angle
+    limit = 2.0 if domain == "bicycle" else 1.0
+    calls: dict[int, list] = {0: [], 1: [], 2: []}
+
+    def feedback(gain, b):
+        def policy(states):
+            calls[b].append(np.array(states))
+            return np.clip(gain * states[:, column : column + 1], -limit, limit)
+
+        return policy
+
+    policies = [feedback(g, b) for b, g in enumerate((0.0, 5.0, 30.0))]
+    together = sampling.evaluate_policies(domain, task, policies, 3, seed=5, max_episode_steps=150)
+    joint_calls = {b: list(c) for b, c in calls.items()}
+    for b, policy in enumerate(policies):
+        calls[b].clear()
+        returns, lengths = sampling.evaluate(domain, task, policy, 3, seed=5, max_episode_steps=150)
+        np.testing.assert_array_equal(together[b][0], returns)
+        np.testing.assert_array_equal(together[b][1], lengths)
+        assert len(calls[b]) == len(joint_calls[b])
+        for alone, joint in zip(calls[b], joint_calls[b]):
+            np.testing.assert_array_equal(alone, joint)
+    assert len({tuple(r[1]) for r in together}) > 1  # the gains lead to different episodes

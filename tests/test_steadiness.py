@@ -12,12 +12,13 @@ from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.suite import bicycle
 
 
-def test_recorder_assigns_lockstep_rows_to_their_episodes():
+def test_per_episode_assigns_lockstep_rows_to_their_episodes():
     """Lengths (3, 1, 2): step 0 asks episodes 0, 1, 2; step 1 asks 0 and 2; step 2 asks 0."""
-    recorder = pipeline._Recorder(lambda states: -states[:, :1])
+    calls = []
     for t, live in enumerate([[0, 1, 2], [0, 2], [0]]):
-        recorder(np.array([[10.0 * i + t, 0.0] for i in live]))
-    states, values = recorder.per_episode(np.array([3, 1, 2]))
+        states = np.array([[10.0 * i + t, 0.0] for i in live])
+        calls.append((states, -states[:, :1]))
+    states, values = pipeline.per_episode(calls, np.array([3, 1, 2]))
     assert [s[:, 0].tolist() for s in states] == [[0, 1, 2], [10], [20, 21]]
     assert [v[:, 0].tolist() for v in values] == [[0, -1, -2], [-10], [-20, -21]]
 

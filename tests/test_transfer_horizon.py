@@ -363,3 +363,24 @@ def test_apprentice_affine_parts_predict_exactly():
     assert periodic.affine() is None  # an angle wraps: no closed form
     with pytest.raises(ValueError, match="affine must be finite"):
         _goal_policy(integrator_step, affine=(a, b[:1], c))
+
+
+def test_shared_source_decides_as_each_policy_alone():
+    """Policies differing only in their apprentice share one source rollout: each gets the
+    actions it computes alone; policies with another source are not grouped."""
+    from tatl_mj.transfer.horizon import shared_source
+
+    common = dict(source_q=OneStepLQRQ(), mapping=CHI, source_step=source_step, target_actions=2.0 * SOURCE_ACTIONS)
+    policies = [
+        HorizonTATLPolicy(_noisy_apprentice(seed).predict, [-50.0], [50.0], horizon=4, **common) for seed in range(3)
+    ]
+    decide = shared_source(policies)
+    assert decide is not None
+    rng = np.random.default_rng(3)
+    states = [CHI.chi(rng.uniform(-2, 2, size=(n, 2))) for n in (4, 1)]
+    got = decide([0, 2], states)
+    for b, s, actions in zip([0, 2], states, got):
+        np.testing.assert_array_equal(actions, policies[b](s))
+    other = HorizonTATLPolicy(_noisy_apprentice(0).predict, [-50.0], [50.0], horizon=5, **common)
+    assert shared_source([policies[0], other]) is None
+    assert shared_source(policies[:1]) is None

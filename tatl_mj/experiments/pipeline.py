@@ -29,13 +29,21 @@ from functools import partial
 from typing import Any, Callable
 
 import numpy as np
+import threadpoolctl
 
 from tatl_mj import sampling, suite
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import alignment, coordinates, fqi, method
+from tatl_mj.transfer import alignment, coordinates, fqi, horizon, method
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
+
+
+def one_thread() -> threadpoolctl.threadpool_limits:
+    """One BLAS/OpenMP thread, for a unit's whole work (and a clip's training), as Ray runs a
+    one-CPU task: a record must not depend on the executor or the machine's core count (a
+    sum's last bit can flip with the thread count, and chaotic targets amplify it)."""
+    return threadpoolctl.threadpool_limits(limits=1)
 
 
 def derive_seed(seed: int, *names: str) -> int:
@@ -118,29 +126,49 @@ def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) 
     )
 
 
-class _Recorder:
-    """A policy that keeps what it was asked and answered, so that per-episode steadiness can be
-    read after a lockstep evaluation: at step t the live episodes are, in order, those whose
-    length exceeds t."""
+def evaluate_curve(
+    spec: ExperimentSpec, preset: Preset, policies: list[Callable], seed: int, record: bool
+) -> list[tuple[np.ndarray, np.ndarray, list | None]]:
+    """Each policy's per-episode returns and lengths on the target task, from the same starts,
+    all in one lockstep batch (a learning curve's budgets), and with ``record`` each one's
+    per-episode (states, action values) lists for steadiness."""
+    target = spec.target
+    together = horizon.shared_source(policies) or sampling.one_by_one(policies)
+    calls: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in policies]
 
-    def __init__(self, policy: Callable):
-        self.policy = policy
-        self.calls: list[tuple[np.ndarray, np.ndarray]] = []
-
-    def __call__(self, states: np.ndarray) -> np.ndarray:
-        values = self.policy(states)
-        self.calls.append((np.array(states, dtype=np.float64), np.array(values, dtype=np.float64)))
+    def joint(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
+        values = together(blocks, states)
+        if record:
+            for b, s, v in zip(blocks, states, values):
+                calls[b].append((np.array(s, dtype=np.float64), np.array(v, dtype=np.float64)))
         return values
 
-    def per_episode(self, lengths: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Each episode's states (T_i, d) and action values (T_i, m), in step order."""
-        rows: list[list[int]] = [[] for _ in lengths]
-        for t in range(len(self.calls)):
-            for j, i in enumerate(np.flatnonzero(lengths > t)):
-                rows[i].append(j)
-        states = [np.stack([self.calls[t][0][j] for t, j in enumerate(r)]) for r in rows]
-        values = [np.stack([np.atleast_1d(self.calls[t][1][j]) for t, j in enumerate(r)]) for r in rows]
-        return states, values
+    results = sampling.evaluate_policies(
+        target.domain,
+        target.task,
+        policies,
+        preset.evaluation_episodes,
+        seed,
+        task_kwargs=target.task_kwargs,
+        max_episode_steps=preset.evaluation_steps,
+        joint=joint,
+    )
+    return [(r, n, per_episode(c, n) if record else None) for (r, n), c in zip(results, calls)]
+
+
+def per_episode(
+    calls: list[tuple[np.ndarray, np.ndarray]], lengths: np.ndarray
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each episode's states (T_i, d) and action values (T_i, m), in step order, from a
+    policy's lockstep calls: at step t its live episodes are, in order, those whose
+    length exceeds t."""
+    rows: list[list[int]] = [[] for _ in lengths]
+    for t in range(len(calls)):
+        for j, i in enumerate(np.flatnonzero(lengths > t)):
+            rows[i].append(j)
+    states = [np.stack([calls[t][0][j] for t, j in enumerate(r)]) for r in rows]
+    values = [np.stack([np.atleast_1d(calls[t][1][j]) for t, j in enumerate(r)]) for r in rows]
+    return states, values
 
 
 def steadiness(description: TaskDescription, states: list[np.ndarray], values: list[np.ndarray]) -> dict:
@@ -614,44 +642,58 @@ def run_method(
     hooks = method.contract(transfer)
     data = hooks.data
     eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
-    # A method that uses no target samples (an oracle, a reference) learns the same
-    # policy at every budget: it is learned and evaluated once and its point repeated.
     uses_samples = hooks.uses_samples
-    curve: list[dict] = []
-    for budget in preset.target_budgets:
-        if curve and not uses_samples:
-            curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
-            continue
+    budgets = preset.target_budgets if uses_samples else preset.target_budgets[:1]
+    points, policies = [], []
+    for budget in budgets:
         ledger.new_budget()
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
         learn_s = time.perf_counter() - start
-        start = time.perf_counter()
-        recorder = _Recorder(policy) if target.steadiness else None
-        returns, lengths = evaluate(spec, preset, policy if recorder is None else recorder, eval_seed)
-        steady = {} if recorder is None else {"steadiness": steadiness(target, *recorder.per_episode(lengths))}
         used = method.samples_used(policy, budget) if uses_samples else 0
         stream = used if data in STREAM_DATA else 0
-        curve.append(
+        policies.append(policy)
+        points.append(
             {
                 "samples": int(budget),
                 # Algorithm 2 may stop before the budget: ``samples_used`` is what it kept.
                 "samples_used": used,
                 # Every real-target transition it learned from (stream, rollouts, own data).
                 "target_transitions": stream + ledger.count if uses_samples else 0,
+                "learn_s": learn_s,
+                # e.g. Algorithm 2's stopping rule not met within the budget
+                "warnings": sorted({str(w.message) for w in caught}),
+            }
+        )
+    # Every budget's policy in one lockstep evaluation, from the same start states.
+    start = time.perf_counter()
+    evaluated = evaluate_curve(spec, preset, policies, eval_seed, bool(target.steadiness))
+    evaluate_s = time.perf_counter() - start
+    steps = sum(int(n.sum()) for _, n, _ in evaluated)
+    curve: list[dict] = []
+    for point, (returns, lengths, calls) in zip(points, evaluated):
+        steady = {} if calls is None else {"steadiness": steadiness(target, *calls)}
+        learned = {k: point[k] for k in ("samples", "samples_used", "target_transitions")}
+        curve.append(
+            {
+                **learned,
                 "mean_return": float(np.mean(returns)),
                 "returns": [float(r) for r in returns],
                 "mean_steps": float(np.mean(lengths)),
                 "steps": [int(n) for n in lengths],  # per episode: survival where episodes are capped
                 **steady,  # per episode, where the target declares steadiness (the bicycle's roll)
-                "learn_s": learn_s,
-                # e.g. Algorithm 2's stopping rule not met within the budget
-                "warnings": sorted({str(w.message) for w in caught}),
-                "evaluate_s": time.perf_counter() - start,
+                "learn_s": point["learn_s"],
+                "warnings": point["warnings"],
+                # The lockstep batch's time, shared out by episode steps.
+                "evaluate_s": evaluate_s * int(lengths.sum()) / max(steps, 1),
             }
         )
+    # A method that uses no target samples (an oracle, a reference) learns the same
+    # policy at every budget: it is learned and evaluated once and its point repeated.
+    for budget in preset.target_budgets[len(curve) :]:
+        curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
     final_used = getattr(policy, "samples_used", None)
     return {
         "experiment": spec.name,

@@ -10,7 +10,8 @@ stepping the dm_control environment.
 - :func:`collect`: transitions of whole episodes (:mod:`.collection`, scheduled
   by :mod:`.schedule`); :func:`policy_transitions`: the same loop on a given
   environment.
-- :func:`evaluate`, :func:`start_states`: a policy's returns (:mod:`.evaluation`).
+- :func:`evaluate`, :func:`evaluate_policies`, :func:`start_states`: a policy's returns,
+  or several policies' in one lockstep batch (:mod:`.evaluation`).
 - :func:`step_from`, :func:`step_values_from`: one-step queries (:mod:`.queries`).
 - :func:`is_batched`, :func:`physics_substeps`: which path a task takes, and
   the MuJoCo substeps taken so far.
@@ -27,7 +28,7 @@ its actions.
 
 from tatl_mj.sampling.checks import IndexPolicy, ValuePolicy
 from tatl_mj.sampling.collection import collect, policy_transitions
-from tatl_mj.sampling.evaluation import evaluate, start_states
+from tatl_mj.sampling.evaluation import Joint, evaluate, evaluate_policies, one_by_one, start_states
 from tatl_mj.sampling.queries import step_from, step_values_from
 from tatl_mj.sampling.schedule import DEFAULT_PARALLEL
 from tatl_mj.sampling.simulator import is_batched, physics_substeps
@@ -38,7 +39,10 @@ __all__ = [
     "ValuePolicy",
     "collect",
     "evaluate",
+    "evaluate_policies",
+    "Joint",
     "is_batched",
+    "one_by_one",
     "physics_substeps",
     "policy_transitions",
     "start_states",

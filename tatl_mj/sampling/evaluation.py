@@ -8,13 +8,19 @@ policies evaluated with one seed see common random numbers.
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from tatl_mj.sampling.checks import ValuePolicy, check_values
 from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, observed_state, simulator_for
 from tatl_mj.validation import integer
+
+Joint = Callable[[list[int], list[np.ndarray]], list[np.ndarray]]
+"""``joint(blocks, states)``: for each listed policy (its index into ``policies``), its action
+values for its live episodes' states, exactly what calling it alone gives (e.g. several
+policies' decisions sharing one source rollout)."""
 
 
 def evaluate(
@@ -40,29 +46,81 @@ def evaluate(
     methods evaluated with one seed see common random numbers. Controls without
     noise draw nothing (``random=None``), one call for all live episodes.
     """
+    (result,) = evaluate_policies(domain, task, [policy], n_episodes, seed, task_kwargs, max_episode_steps, n_threads)
+    return result
+
+
+def evaluate_policies(
+    domain: str,
+    task: str,
+    policies: Sequence[ValuePolicy],
+    n_episodes: int,
+    seed: int,
+    task_kwargs: dict[str, Any] | None = None,
+    max_episode_steps: int | None = None,
+    n_threads: int = 2,
+    joint: Joint | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`evaluate` of each of ``policies`` with the same ``seed``, all in one lockstep batch.
+
+    Each policy's episodes are the ones ``evaluate`` runs for it alone: the same
+    starts and noise, and it is called with the same states in the same order;
+    only the per-step work of stepping them is shared (a learning curve's budgets
+    are evaluated together). ``joint`` answers all policies' calls of a step at
+    once (default: each policy in turn). Tasks stepped through their environment
+    or their known table evaluate the policies one after another.
+    """
     n_episodes = integer("", "n_episodes", n_episodes, 1)
     if max_episode_steps is not None:
         integer("", "max_episode_steps", max_episode_steps, 1)
+    if not policies:
+        raise ValueError("evaluate_policies needs at least one policy")
     sim = simulator_for(domain, task, task_kwargs, n_threads)
     if sim.table is not None:
-        return _evaluate_table(sim, policy, n_episodes, seed, max_episode_steps)
+        return [_evaluate_table(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
     if not sim.fast:
-        return _evaluate_env(sim, policy, n_episodes, seed, max_episode_steps)
+        return [_evaluate_env(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
     limit = sim.step_limit(max_episode_steps)
     if not np.isfinite(limit):
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
+    if joint is None:
+        joint = one_by_one(policies)
+    returns, lengths = _evaluate_batch(sim, joint, len(policies), n_episodes, seed, limit)
+    return [(returns[b], lengths[b]) for b in range(len(policies))]
+
+
+def one_by_one(policies: Sequence[ValuePolicy]) -> Joint:
+    """The plain :data:`Joint`: each listed policy called on its own states, in turn."""
+    return functools.partial(_call_each, policies)
+
+
+def _call_each(policies: Sequence[ValuePolicy], blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
+    return [policies[b](s) for b, s in zip(blocks, states)]
+
+
+def _evaluate_batch(
+    sim: Simulator, joint: Joint, n_policies: int, n_episodes: int, seed: int, limit: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(K, n) returns and lengths: simulation b * n + i is policy b's episode i."""
+    total = n_policies * n_episodes
     with sim.seeded_env(seed) as env:
         task_obj = env.task
-        randoms = evaluation_randoms(seed, n_episodes) if task_obj.control_noise else None
+        # Every policy's episode i starts where and draws what evaluate's episode i does.
+        randoms = None
+        if task_obj.control_noise:
+            randoms = [r for _ in range(n_policies) for r in evaluation_randoms(seed, n_episodes)]
         # Optional in the domain contract: each row's controls from its own stream at once.
         controls_each = getattr(task_obj, "controls_each", None)
-        batch = sim.new_batch(n_episodes)
-        live = np.arange(n_episodes)
-        states = sim.start_episodes(batch, live, env)
-        returns = np.zeros(n_episodes)
-        lengths = np.zeros(n_episodes, np.int64)
+        batch = sim.new_batch(total)
+        live = np.arange(total)
+        qpos, qvel = task_obj.start_configurations(env.physics, n_episodes)
+        qpos, qvel = np.tile(qpos, (n_policies, 1)), np.tile(qvel, (n_policies, 1))
+        sim.place(batch, live, qpos, qvel)
+        states = sim.physics.states_from(qpos, qvel)
+        returns = np.zeros(total)
+        lengths = np.zeros(total, np.int64)
         while len(live):
-            values = check_values(policy(states), len(live), sim)
+            values = _joint_values(joint, sim, live, states, n_episodes)
             if randoms is None:
                 controls = task_obj.controls(values, None)
             elif controls_each is not None:  # the same draws in one call
@@ -77,7 +135,16 @@ def evaluate(
             lengths[live] += 1
             ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
             live, states = live[~ended], next_states[~ended]
-    return returns, lengths
+    return returns.reshape(n_policies, n_episodes), lengths.reshape(n_policies, n_episodes)
+
+
+def _joint_values(joint: Joint, sim: Simulator, live: np.ndarray, states: np.ndarray, n_episodes: int) -> np.ndarray:
+    """The live episodes' action values: each policy called (through ``joint``) on its own rows."""
+    owner = live // n_episodes  # live is sorted, so each policy's rows are one run
+    blocks, starts = np.unique(owner, return_index=True)
+    ends = [*starts[1:], len(live)]
+    answers = joint([int(b) for b in blocks], [states[a:z] for a, z in zip(starts, ends)])
+    return np.concatenate([check_values(v, z - a, sim) for v, a, z in zip(answers, starts, ends)])
 
 
 def evaluation_randoms(seed: int, n_episodes: int) -> list[np.random.Generator]:

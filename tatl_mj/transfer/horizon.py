@@ -306,8 +306,12 @@ class HorizonTATLPolicy:
         control = moved.transpose(2, 0, 3, 1) / step[:, None, None, :]  # (N, H, d, m)
         return free, control
 
-    def step(self, target_states: np.ndarray) -> HorizonStep:
-        """One decision for (N, dT) target states, with every intermediate."""
+    def step(self, target_states: np.ndarray, source_part: tuple[np.ndarray, ...] | None = None) -> HorizonStep:
+        """One decision for (N, dT) target states, with every intermediate.
+
+        ``source_part``: what ``_source_references`` gives for these states, when the
+        caller rolled the source for several policies at once (:func:`shared_source`).
+        """
         s_T = as_states(target_states, "target_states")
         n, d = s_T.shape
         m = self.target_low.size
@@ -317,7 +321,8 @@ class HorizonTATLPolicy:
         if self.periodic is not None and len(self.periodic) != d:
             raise ValueError(f"periodic has {len(self.periodic)} entries, target states have {d} coordinates")
         if self.reference == "source":
-            s_hat_S, a_S, source_states, references = self._source_references(s_T)
+            part = self._source_references(s_T) if source_part is None else source_part
+            s_hat_S, a_S, source_states, references = part
             nominal = self.target_actions[a_S]
         else:
             s_hat_S = a_S = source_states = None
@@ -339,6 +344,43 @@ class HorizonTATLPolicy:
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         """(N, dT) target states -> (N, mT) target action values."""
         return self.step(target_states).action
+
+
+_SOURCE_SIDE = ("source_q", "mapping", "source_step", "source_zero", "horizon", "step_ratio", "periodic")
+
+
+def _same_source(policy: object, first: object) -> bool:
+    if not (isinstance(policy, HorizonTATLPolicy) and isinstance(first, HorizonTATLPolicy)):
+        return False
+    same = all(
+        getattr(policy, f) is getattr(first, f) or np.array_equal(getattr(policy, f), getattr(first, f))
+        for f in _SOURCE_SIDE
+    )
+    return same and policy.reference == "source" and np.array_equal(policy.target_actions, first.target_actions)
+
+
+def shared_source(policies: list) -> Callable[[list[int], list[np.ndarray]], list[np.ndarray]] | None:
+    """Several horizon policies' decisions with one source rollout for all their states, or None.
+
+    The budgets of one horizon TA-TL unit share the source side (Q_S, chi, P_S, H, rho)
+    and differ in the apprentice. A row's source rollout does not depend on the other
+    rows, so rolling every policy's states at once gives each what it rolls alone, in
+    a tenth of the source queries. None unless there are several such policies.
+    """
+    if len(policies) < 2 or not all(_same_source(p, policies[0]) for p in policies):
+        return None
+    first = policies[0]
+
+    def decide(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
+        rows = [as_states(s, "target_states") for s in states]
+        part = first._source_references(np.concatenate(rows))
+        ends = np.cumsum([len(r) for r in rows])
+        starts = ends - [len(r) for r in rows]
+        return [
+            policies[b].step(r, tuple(x[a:z] for x in part)).action for b, r, a, z in zip(blocks, rows, starts, ends)
+        ]
+
+    return decide
 
 
 def _closed_form(
