@@ -140,18 +140,27 @@ class Physics(common.StatePhysics):
             ):
                 raise ValueError(f"set_pendulum {name} must be a finite number > 0, got {value!r}")
         length, mass = float(length), float(mass)
-        model = self.named.model
-        tip_inertia = 0.4 * mass * TIP_RADIUS**2
-        model.body_mass["pole"] = mass
-        model.body_inertia["pole"] = tip_inertia
-        model.body_ipos["pole"] = (0.0, 0.0, length)
-        rod_radius = model.geom_size["rod"][0]
-        model.geom_size["rod"][1] = length / 2.0  # capsule half-length
-        model.geom_pos["rod"] = (0.0, 0.0, length / 2.0)
-        model.geom_pos["tip"] = (0.0, 0.0, length)
+        # Raw arrays at ids looked up once: the time-varying task calls this every step,
+        # and named indexing costs several times the writes.
+        ids = getattr(self, "_pendulum_ids", None)
+        if ids is None:
+            ids = self._pendulum_ids = (
+                self.model.name2id("pole", "body"),
+                self.model.name2id("rod", "geom"),
+                self.model.name2id("tip", "geom"),
+            )
+        pole, rod, tip = ids
+        model = self.model.ptr
+        model.body_mass[pole] = mass
+        model.body_inertia[pole] = 0.4 * mass * TIP_RADIUS**2
+        model.body_ipos[pole] = (0.0, 0.0, length)
+        rod_radius = model.geom_size[rod, 0]
+        model.geom_size[rod, 1] = length / 2.0  # capsule half-length
+        model.geom_pos[rod] = (0.0, 0.0, length / 2.0)
+        model.geom_pos[tip] = (0.0, 0.0, length)
         # Bounding volumes, so rendering does not cull a lengthened rod.
-        model.geom_rbound["rod"] = length / 2.0 + rod_radius
-        model.geom_aabb["rod"] = (0.0, 0.0, 0.0, rod_radius, rod_radius, length / 2.0 + rod_radius)
+        model.geom_rbound[rod] = length / 2.0 + rod_radius
+        model.geom_aabb[rod] = (0.0, 0.0, 0.0, rod_radius, rod_radius, length / 2.0 + rod_radius)
         scratch = getattr(self, "_scratch_data", None)
         if scratch is None:
             scratch = mujoco.MjData(self.model.ptr)
