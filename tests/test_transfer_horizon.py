@@ -1,4 +1,4 @@
-"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.horizon).
+"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.methods.horizon).
 
 1. With H = 1, rho = 1 and W = I it is Algorithm 1 (tatl.TATLPolicy) up to rounding, on
    the fixture of test_transfer_tatl (double integrator seen through an affine map) and on
@@ -17,7 +17,7 @@ from test_transfer_tatl import target_step as tatl_target_step
 from tatl_mj.transfer.alignment import AffineMapping
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice
 from tatl_mj.transfer.features import LinearFeatures, wrap_angle
-from tatl_mj.transfer.horizon import HorizonTATLPolicy
+from tatl_mj.transfer.methods.horizon import HorizonTATLPolicy
 from tatl_mj.transfer.tatl import TATLPolicy
 
 # --- The fixture of test_transfer_tatl ------------------------------------------------
@@ -285,7 +285,7 @@ def test_rejects_mismatched_states():
 
 
 def test_linearised_recovers_a_linear_model_and_cancels_fixed_seed_noise():
-    from tatl_mj.transfer.horizon import linearised
+    from tatl_mj.transfer.methods.horizon import linearised
 
     A = np.array([[1.0, 0.1], [-0.2, 0.95]])
     B = np.array([[0.0], [0.3]])
