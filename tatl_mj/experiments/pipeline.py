@@ -31,9 +31,9 @@ from typing import Any, Callable
 import numpy as np
 
 from tatl_mj import sampling, suite
-from tatl_mj.description import CellMap, TaskDescription
+from tatl_mj.description import TaskDescription
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import alignment, coordinates, fqi, method
+from tatl_mj.transfer import alignment, apprentice, coordinates, fqi, method
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
 
@@ -402,52 +402,28 @@ def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
 
 
 def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None) -> Callable | None:
-    """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
+    """U_Mhat(pi) as a hook (``apprentice.model_return``), or None where the task has no reward.
 
-    The target task's own reward and end conditions (``_target_reward``) are
-    applied to the model's predicted states, from the start states of the real
-    rollouts of U_M (``_algorithm2_seed``), for the evaluation protocol's steps.
-    For a task that takes indices, predictions are snapped to the nearest of its
-    states (its known model's cells). A task with no such reward gets None:
-    Algorithm 2 then cannot run there.
+    The target task's own reward and end conditions (``_target_reward``) score the
+    model's predicted states, from the start states of the real rollouts of U_M
+    (``_algorithm2_seed``), for the evaluation protocol's steps. A task with no
+    such reward gets None: Algorithm 2 then cannot run there.
     """
-    target = spec.target
-    description = describe(target)
     if reward is None:
         return None
-    cells = CellMap(description.known_model()[3]) if description.known_model is not None else None
+    target = spec.target
+    description = describe(target)
     starts = sampling.start_states(
         target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
     )
-    actions = description.action_values
-
-    def snap(states: np.ndarray) -> np.ndarray:
-        if not description.discrete:
-            return states
-        if cells is None:
-            return np.clip(np.rint(states), description.state_low, description.state_high)
-        return cells.cells[cells.nearest(states)].astype(np.float64)
-
-    def model_return(model: Any, policy: Callable) -> float:
-        states, total = starts.copy(), np.zeros(len(starts))
-        alive = np.ones(len(starts), dtype=bool)
-        with np.errstate(all="ignore"):
-            for _ in range(preset.evaluation_steps):
-                action = policy(states)
-                values = action if action.ndim == 2 else actions[action]
-                next_states = model.predict(states, values)
-                if not np.all(np.isfinite(next_states)):
-                    return float("nan")  # the model diverged
-                next_states = snap(next_states)
-                rewards, ended = reward(states, action, next_states)
-                total += np.where(alive, rewards, 0.0)
-                alive &= ~ended
-                states = next_states
-                if not alive.any():
-                    break
-        return float(total.mean())
-
-    return model_return
+    return partial(
+        apprentice.model_return,
+        starts=starts,
+        reward=reward,
+        action_values=description.action_values,
+        steps=preset.evaluation_steps,
+        snap=apprentice.state_snap(description),
+    )
 
 
 class Ledger:
