@@ -32,8 +32,9 @@ import numpy as np
 
 from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
+from tatl_mj.experiments import mappings
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import alignment, apprentice, coordinates, fqi, method
+from tatl_mj.transfer import apprentice, fqi, method
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
 
@@ -178,11 +179,6 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     return q, len(data)
 
 
-def _coordinates(side: Side) -> coordinates.Coordinates:
-    description = describe(side)
-    return coordinates.Coordinates(description.periodic, description.angle_origin)
-
-
 def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
     """The source's samples for a learned map: random-policy episodes unless the spec asks for its box."""
     side = spec.source
@@ -200,44 +196,18 @@ def _learn_mapping(
     target_stream: Transitions,
 ) -> tuple[Any, dict | None, int, int]:
     """Phase II: the mapping (in each task's mapping coordinates), its record, and the
-    source and target samples it used (the target's are the stream's head, reused later)."""
-    kind = spec.mapping.kind
-    if kind == "identity":
-        return alignment.IdentityMapping(), None, 0, 0
-    source_coords, target_coords = _coordinates(spec.source), _coordinates(spec.target)
-    if kind == "affine":
-        matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)  # its shape is checked at spec load
-        offset = np.asarray(spec.mapping.offset or np.zeros(len(matrix)), dtype=np.float64)
-        record = {"kind": kind, "matrix": matrix.tolist(), "offset": offset.tolist()}
-        inner = alignment.AffineMapping(matrix, offset)
-        return coordinates.InCoordinates(inner, source_coords, target_coords), record, 0, 0
-    n = preset.alignment_samples
-    source = _alignment_source(spec, n, seed)
-    target = target_stream.head(n)
-    rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment"))
-    if kind == "transition_alignment":
-        settings = alignment.TransitionAlignment.from_dict(
-            {k: tuple(v) if isinstance(v, list) else v for k, v in spec.mapping.transition.items()}
-        )
-        mapping, record = coordinates.align_in_coordinates(
-            source,
-            target,
-            source_coords,
-            target_coords,
-            describe(spec.source).n_actions,
-            describe(spec.target).n_actions,
-            settings=settings,
-            rng=rng,
-        )
-        return mapping, record, len(source), len(target)
-    inner = alignment.align_manifolds(
-        source_coords.to_mapping(source.states),
-        target_coords.to_mapping(target.states),
-        n_neighbors=spec.mapping.n_neighbors,
-        mu=spec.mapping.mu,
-        rng=rng,
+    source and target samples it used (the target's are the stream's head, reused later);
+    built by its kind's entry of ``mappings.MAPPINGS``."""
+    inputs = mappings.MappingInputs(
+        settings=spec.mapping,
+        source=describe(spec.source),
+        target=describe(spec.target),
+        n=preset.alignment_samples,
+        source_samples=partial(_alignment_source, spec, seed=seed),
+        target_stream=target_stream,
+        rng=lambda: np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment")),
     )
-    return coordinates.InCoordinates(inner, source_coords, target_coords), None, len(source), len(target)
+    return mappings.MAPPINGS[spec.mapping.kind](inputs)
 
 
 def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtifacts:
