@@ -19,7 +19,7 @@ import numpy as np
 
 from tatl_mj.experiments import pipeline
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.transfer.method import RL
+from tatl_mj.transfer.methods.target_fqi import RL
 
 SAMPLES = 50_000
 SEEDS = range(5)

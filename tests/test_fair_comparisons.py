@@ -18,8 +18,9 @@ from tatl_mj.transfer import registry
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
-from tatl_mj.transfer.method import RL, UMATL, TransferProblem, UMATLPrior
-from tatl_mj.transfer.model_based import ApprenticeFQI
+from tatl_mj.transfer.method import TransferProblem
+from tatl_mj.transfer.methods.model_based import ApprenticeFQI
+from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
 from tatl_mj.transitions import Transitions
 
 ACTIONS = np.array([[-1.0], [0.0], [1.0]])

@@ -9,9 +9,11 @@ from tatl_mj import suite
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.fqi import q_iteration
-from tatl_mj.transfer.horizon import HorizonTATL, HorizonTATLPolicy
-from tatl_mj.transfer.method import TATL, ProjectedSource, TransferProblem
-from tatl_mj.transfer.tabular import OneStepOracle, ReplanPolicy, ReplanTATL
+from tatl_mj.transfer.method import TransferProblem
+from tatl_mj.transfer.methods.horizon import HorizonTATL, HorizonTATLPolicy
+from tatl_mj.transfer.methods.projected import ProjectedSource
+from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanPolicy, ReplanTATL
+from tatl_mj.transfer.methods.tatl import TATL
 
 
 def test_horizon_method_with_one_step_is_the_papers_rule():

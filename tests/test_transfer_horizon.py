@@ -1,4 +1,4 @@
-"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.horizon).
+"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.methods.horizon).
 
 1. With H = 1, rho = 1 and W = I it is Algorithm 1 (tatl.TATLPolicy) up to rounding, on
    the fixture of test_transfer_tatl (double integrator seen through an affine map) and on
@@ -17,7 +17,7 @@ from test_transfer_tatl import target_step as tatl_target_step
 from tatl_mj.transfer.alignment import AffineMapping
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice
 from tatl_mj.transfer.features import LinearFeatures, wrap_angle
-from tatl_mj.transfer.horizon import HorizonTATLPolicy
+from tatl_mj.transfer.methods.horizon import HorizonTATLPolicy
 from tatl_mj.transfer.tatl import TATLPolicy
 
 # --- The fixture of test_transfer_tatl ------------------------------------------------
@@ -285,7 +285,7 @@ def test_rejects_mismatched_states():
 
 
 def test_linearised_recovers_a_linear_model_and_cancels_fixed_seed_noise():
-    from tatl_mj.transfer.horizon import linearised
+    from tatl_mj.transfer.methods.horizon import linearised
 
     A = np.array([[1.0, 0.1], [-0.2, 0.95]])
     B = np.array([[0.0], [0.3]])
@@ -368,7 +368,7 @@ def test_apprentice_affine_parts_predict_exactly():
 def test_shared_source_decides_as_each_policy_alone():
     """Policies differing only in their apprentice share one source rollout: each gets the
     actions it computes alone; policies with another source are not grouped."""
-    from tatl_mj.transfer.horizon import shared_source
+    from tatl_mj.transfer.methods.horizon import shared_source
 
     common = dict(source_q=OneStepLQRQ(), mapping=CHI, source_step=source_step, target_actions=2.0 * SOURCE_ACTIONS)
     policies = [

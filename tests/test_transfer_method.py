@@ -1,4 +1,4 @@
-"""The plug-in interface and the built-in methods (tatl_mj.transfer.method, baselines)."""
+"""The plug-in interface and the built-in methods (tatl_mj.transfer.method, methods.tatl, methods.target_fqi)."""
 
 import types
 
@@ -7,10 +7,11 @@ import pytest
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import IdentityMapping
-from tatl_mj.transfer.baselines import MappedQ, rl, uma_tl
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor
-from tatl_mj.transfer.method import RL, TATL, UMATL, TransferMethod, TransferProblem
+from tatl_mj.transfer.method import TransferMethod, TransferProblem
+from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, rl, uma_tl
+from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.registry import METHODS, build
 from tatl_mj.transfer.tatl import TATLPolicy
 from tatl_mj.transitions import Transitions

@@ -1,4 +1,4 @@
-"""Known answers for the tabular apprentice and ta-tl-replan (tatl_mj.transfer.tabular).
+"""Known answers for the tabular apprentice and ta-tl-replan (tatl_mj.transfer.tabular, methods.replan).
 
 The windy grid world is the target, the plain grid its source, the mapping the
 identity; the exact models come from gridworld.transition_model, the data from
@@ -11,16 +11,18 @@ import numpy as np
 import pytest
 
 from tatl_mj import sampling, suite
+from tatl_mj.description import CellMap
 from tatl_mj.suite import gridworld
 from tatl_mj.transfer import tabular
 from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping
 from tatl_mj.transfer.fqi import q_iteration
+from tatl_mj.transfer.methods.replan import OneStepRule, replan
 from tatl_mj.transitions import Transitions
 
 GAMMA = 0.95
 PLAIN = gridworld.transition_model(windy=False)
 WINDY = gridworld.transition_model(windy=True)
-CELLS = tabular.CellMap(PLAIN[3])
+CELLS = CellMap(PLAIN[3])
 SOURCE = tabular.TabularModel(*PLAIN[:3])
 TARGET = tabular.TabularModel(*WINDY[:3])
 GOAL = int(CELLS.index(np.array([gridworld.GOAL], dtype=float))[0])
@@ -73,7 +75,7 @@ def test_cell_map_round_trip_and_errors():
     with pytest.raises(ValueError, match="is not one of"):
         CELLS.index(np.array([[0.5, 0.0]]))
     with pytest.raises(ValueError, match="must not repeat"):
-        tabular.CellMap(np.array([[0, 0], [0, 0]]))
+        CellMap(np.array([[0, 0], [0, 0]]))
 
 
 def test_apprentice_reproduces_the_windy_grid_after_one_visit_per_pair():
@@ -91,7 +93,7 @@ def test_apprentice_reproduces_the_windy_grid_after_one_visit_per_pair():
 
 
 def test_apprentice_mode_ties_and_fallback():
-    cells = tabular.CellMap(np.arange(4)[:, None])
+    cells = CellMap(np.arange(4)[:, None])
     prior = tabular.TabularModel(
         np.array([[3, 2], [1, 1], [2, 2], [3, 3]]), np.full((4, 2), 7.0), np.zeros((4, 2), bool)
     )
@@ -121,7 +123,7 @@ def test_apprentice_mode_ties_and_fallback():
 
 def test_replanner_with_the_exact_model_is_optimal_from_every_start():
     apprentice = tabular.fit_tabular_apprentice(one_visit_per_pair(), CELLS, SOURCE)
-    policy = tabular.replan(apprentice, CELLS, GAMMA)
+    policy = replan(apprentice, CELLS, GAMMA)
     exact = q_iteration(*WINDY[:3], GAMMA)
     np.testing.assert_allclose(policy.q.q, exact.q, rtol=0, atol=1e-9)
     # Acting in the windy environment from every free cell: the goal without a bump
@@ -148,7 +150,7 @@ def test_replanner_falls_back_to_the_prior_where_no_data_exist():
     part = Transitions(
         *(getattr(data, f)[seen] for f in ("states", "actions", "rewards", "next_states", "absorbing", "last"))
     )
-    policy = tabular.replan(tabular.fit_tabular_apprentice(part, CELLS, SOURCE), CELLS, GAMMA, len(part))
+    policy = replan(tabular.fit_tabular_apprentice(part, CELLS, SOURCE), CELLS, GAMMA, len(part))
     east = (CELLS.cells[:, 1] >= 6) & (np.arange(CELLS.n_cells) != GOAL)
     assert np.array_equal(policy.visited, np.repeat(east[:, None], 4, axis=1))
     for field in ("next_state", "reward", "absorbing"):
@@ -159,12 +161,12 @@ def test_replanner_falls_back_to_the_prior_where_no_data_exist():
     # Without data at all the replanner is the source's Q-iteration; the uninformed prior gives 0.
     empty = part.head(0)
     np.testing.assert_allclose(
-        tabular.replan(tabular.fit_tabular_apprentice(empty, CELLS, SOURCE), CELLS, GAMMA).q.q,
+        replan(tabular.fit_tabular_apprentice(empty, CELLS, SOURCE), CELLS, GAMMA).q.q,
         q_iteration(*PLAIN[:3], GAMMA).q,
         atol=1e-9,
     )
     blank = tabular.fit_tabular_apprentice(empty, CELLS, tabular.uninformed_model(CELLS.n_cells, 4))
-    assert np.array_equal(tabular.replan(blank, CELLS, GAMMA).q.q, np.zeros((CELLS.n_cells, 4)))
+    assert np.array_equal(replan(blank, CELLS, GAMMA).q.q, np.zeros((CELLS.n_cells, 4)))
 
 
 def test_mapped_model_translates_cells_through_the_mapping():
@@ -174,7 +176,7 @@ def test_mapped_model_translates_cells_through_the_mapping():
     )
     # The target lists the same cells shifted by (10, 20) and in reverse order.
     order = np.arange(CELLS.n_cells)[::-1]
-    shifted = tabular.CellMap(CELLS.cells[order] + [10, 20])
+    shifted = CellMap(CELLS.cells[order] + [10, 20])
     mapped = tabular.mapped_model(SOURCE, CELLS, shifted, AffineMapping(np.eye(2), [10.0, 20.0]))
     position = np.argsort(order)  # target index of each source cell
     assert np.array_equal(mapped.next_state, position[SOURCE.next_state[order]])
@@ -184,7 +186,7 @@ def test_mapped_model_translates_cells_through_the_mapping():
 class TableQ:
     """The greedy source policy of a TabularModel, over states (for the one-step rule)."""
 
-    def __init__(self, model: tabular.TabularModel, cells: tabular.CellMap, gamma: float):
+    def __init__(self, model: tabular.TabularModel, cells: CellMap, gamma: float):
         self.q, self.cells, self.n_actions = model.q(gamma), cells, model.n_actions
 
     def values(self, states):
@@ -197,7 +199,7 @@ class TableQ:
 def test_one_step_rule_with_the_exact_model_loops_between_two_cells():
     # A track of cells 0..3, goal 3, actions step -1 / +1 (clipped at the ends).
     # In the target a current adds +2 in cell 1 and -2 in cell 2.
-    cells = tabular.CellMap(np.arange(4)[:, None])
+    cells = CellMap(np.arange(4)[:, None])
     step, current = np.array([-1, 1]), np.array([0, 2, -2, 0])
 
     def track(cur):
@@ -206,7 +208,7 @@ def test_one_step_rule_with_the_exact_model_loops_between_two_cells():
         return tabular.TabularModel(nxt, 10.0 * (nxt == 3), nxt == 3)
 
     source, target = track(np.zeros(4, int)), track(current)
-    rule = tabular.OneStepRule(
+    rule = OneStepRule(
         TableQ(source, cells, 0.9),
         IdentityMapping(),
         lambda s, a: cells.cells[source.next_state[cells.index(s), a]].astype(float),
@@ -234,12 +236,12 @@ def test_one_step_rule_with_the_exact_model_loops_between_two_cells():
         cells,
         source,
     )
-    assert tabular.replan(exact, cells, 0.9)(np.array([[1.0]])).tolist() == [1]
+    assert replan(exact, cells, 0.9)(np.array([[1.0]])).tolist() == [1]
 
 
 def test_one_step_rule_with_the_exact_windy_model_is_trapped_from_the_start():
     # The wind of column 6 (2 up) throws every move from (0, 6) back to (0, 6): a 1-cycle.
-    rule = tabular.OneStepRule(
+    rule = OneStepRule(
         TableQ(SOURCE, CELLS, GAMMA),
         IdentityMapping(),
         lambda s, a: sampling.step_from("gridworld", "plain", s, a),
@@ -255,7 +257,7 @@ def test_one_step_rule_with_the_exact_windy_model_is_trapped_from_the_start():
 
 def test_policy_transitions_follows_the_policy_from_random_starts():
     apprentice = tabular.fit_tabular_apprentice(one_visit_per_pair(), CELLS, SOURCE)
-    policy = tabular.replan(apprentice, CELLS, GAMMA)
+    policy = replan(apprentice, CELLS, GAMMA)
 
     def run(seed, n=200):
         env = suite.load("gridworld", "windy", task_kwargs={"random": seed, "random_start": True})

@@ -32,9 +32,11 @@ import numpy as np
 import threadpoolctl
 
 from tatl_mj import sampling, suite
-from tatl_mj.description import CellMap, TaskDescription
+from tatl_mj.description import TaskDescription
+from tatl_mj.experiments import mappings
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import alignment, coordinates, fqi, horizon, method
+from tatl_mj.transfer import apprentice, fqi, method
+from tatl_mj.transfer.methods import horizon
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
 
@@ -206,11 +208,6 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     return q, len(data)
 
 
-def _coordinates(side: Side) -> coordinates.Coordinates:
-    description = describe(side)
-    return coordinates.Coordinates(description.periodic, description.angle_origin)
-
-
 def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
     """The source's samples for a learned map: random-policy episodes unless the spec asks for its box."""
     side = spec.source
@@ -228,44 +225,18 @@ def _learn_mapping(
     target_stream: Transitions,
 ) -> tuple[Any, dict | None, int, int]:
     """Phase II: the mapping (in each task's mapping coordinates), its record, and the
-    source and target samples it used (the target's are the stream's head, reused later)."""
-    kind = spec.mapping.kind
-    if kind == "identity":
-        return alignment.IdentityMapping(), None, 0, 0
-    source_coords, target_coords = _coordinates(spec.source), _coordinates(spec.target)
-    if kind == "affine":
-        matrix = np.asarray(spec.mapping.matrix, dtype=np.float64)  # its shape is checked at spec load
-        offset = np.asarray(spec.mapping.offset or np.zeros(len(matrix)), dtype=np.float64)
-        record = {"kind": kind, "matrix": matrix.tolist(), "offset": offset.tolist()}
-        inner = alignment.AffineMapping(matrix, offset)
-        return coordinates.InCoordinates(inner, source_coords, target_coords), record, 0, 0
-    n = preset.alignment_samples
-    source = _alignment_source(spec, n, seed)
-    target = target_stream.head(n)
-    rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment"))
-    if kind == "transition_alignment":
-        settings = alignment.TransitionAlignment.from_dict(
-            {k: tuple(v) if isinstance(v, list) else v for k, v in spec.mapping.transition.items()}
-        )
-        mapping, record = coordinates.align_in_coordinates(
-            source,
-            target,
-            source_coords,
-            target_coords,
-            describe(spec.source).n_actions,
-            describe(spec.target).n_actions,
-            settings=settings,
-            rng=rng,
-        )
-        return mapping, record, len(source), len(target)
-    inner = alignment.align_manifolds(
-        source_coords.to_mapping(source.states),
-        target_coords.to_mapping(target.states),
-        n_neighbors=spec.mapping.n_neighbors,
-        mu=spec.mapping.mu,
-        rng=rng,
+    source and target samples it used (the target's are the stream's head, reused later);
+    built by its kind's entry of ``mappings.MAPPINGS``."""
+    inputs = mappings.MappingInputs(
+        settings=spec.mapping,
+        source=describe(spec.source),
+        target=describe(spec.target),
+        n=preset.alignment_samples,
+        source_samples=partial(_alignment_source, spec, seed=seed),
+        target_stream=target_stream,
+        rng=lambda: np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment")),
     )
-    return coordinates.InCoordinates(inner, source_coords, target_coords), None, len(source), len(target)
+    return mappings.MAPPINGS[spec.mapping.kind](inputs)
 
 
 def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtifacts:
@@ -430,52 +401,28 @@ def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
 
 
 def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None) -> Callable | None:
-    """U_Mhat(pi): a policy's mean return when a model stands in for the target, or None.
+    """U_Mhat(pi) as a hook (``apprentice.model_return``), or None where the task has no reward.
 
-    The target task's own reward and end conditions (``_target_reward``) are
-    applied to the model's predicted states, from the start states of the real
-    rollouts of U_M (``_algorithm2_seed``), for the evaluation protocol's steps.
-    For a task that takes indices, predictions are snapped to the nearest of its
-    states (its known model's cells). A task with no such reward gets None:
-    Algorithm 2 then cannot run there.
+    The target task's own reward and end conditions (``_target_reward``) score the
+    model's predicted states, from the start states of the real rollouts of U_M
+    (``_algorithm2_seed``), for the evaluation protocol's steps. A task with no
+    such reward gets None: Algorithm 2 then cannot run there.
     """
-    target = spec.target
-    description = describe(target)
     if reward is None:
         return None
-    cells = CellMap(description.known_model()[3]) if description.known_model is not None else None
+    target = spec.target
+    description = describe(target)
     starts = sampling.start_states(
         target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
     )
-    actions = description.action_values
-
-    def snap(states: np.ndarray) -> np.ndarray:
-        if not description.discrete:
-            return states
-        if cells is None:
-            return np.clip(np.rint(states), description.state_low, description.state_high)
-        return cells.cells[cells.nearest(states)].astype(np.float64)
-
-    def model_return(model: Any, policy: Callable) -> float:
-        states, total = starts.copy(), np.zeros(len(starts))
-        alive = np.ones(len(starts), dtype=bool)
-        with np.errstate(all="ignore"):
-            for _ in range(preset.evaluation_steps):
-                action = policy(states)
-                values = action if action.ndim == 2 else actions[action]
-                next_states = model.predict(states, values)
-                if not np.all(np.isfinite(next_states)):
-                    return float("nan")  # the model diverged
-                next_states = snap(next_states)
-                rewards, ended = reward(states, action, next_states)
-                total += np.where(alive, rewards, 0.0)
-                alive &= ~ended
-                states = next_states
-                if not alive.any():
-                    break
-        return float(total.mean())
-
-    return model_return
+    return partial(
+        apprentice.model_return,
+        starts=starts,
+        reward=reward,
+        action_values=description.action_values,
+        steps=preset.evaluation_steps,
+        snap=apprentice.state_snap(description),
+    )
 
 
 class Ledger:

@@ -29,7 +29,6 @@ from tatl_mj.validation import is_integer, is_number
 
 SAMPLING_KINDS = ("episodes", "uniform")
 SOURCE_LEARNERS = ("fqi", "q_iteration")
-MAPPING_KINDS = ("identity", "manifold_alignment", "transition_alignment", "affine")
 ALIGNMENT_DATA = ("episodes", "uniform")
 # The name becomes a folder under --out: no separators, no "..", no hidden names.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}")
@@ -319,8 +318,10 @@ def _check_source_learning(spec: ExperimentSpec, description: Any) -> None:
 
 
 def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
+    from tatl_mj.experiments.mappings import MAPPINGS, transition_settings
+
     p, mapping = spec.path, spec.mapping
-    _choice(p, "mapping.kind", mapping.kind, MAPPING_KINDS)
+    _choice(p, "mapping.kind", mapping.kind, tuple(MAPPINGS))
     if mapping.kind == "identity" and source.state_dim != target.state_dim:
         raise SpecError(
             f"{p}: key 'mapping.kind' = 'identity' needs equal state sizes, got {source.state_dim} "
@@ -346,12 +347,8 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
         if mapping.kind != "transition_alignment":
             raise SpecError(f"{p}: key 'mapping.transition' applies only to kind 'transition_alignment'")
     if mapping.kind == "transition_alignment":
-        from tatl_mj.transfer.alignment import TransitionAlignment
-
         try:
-            TransitionAlignment.from_dict(
-                {k: tuple(v) if isinstance(v, list) else v for k, v in mapping.transition.items()}
-            )
+            transition_settings(mapping.transition)
         except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'mapping.transition': {error}") from None
     _choice(p, "mapping.source_data", mapping.source_data, ALIGNMENT_DATA)

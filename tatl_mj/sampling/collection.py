@@ -14,8 +14,8 @@ the call's end (how many steps a call takes is a speed choice,
 
 Tasks stepped through their environment run one plain loop over it
 (:func:`_environment_loop`), which :func:`policy_transitions` runs on a given
-environment; a task with a known table looks its steps up in a copy of that
-loop (:func:`_collect_table`).
+environment; a task with a known table runs the same loop with the table's
+steps looked up instead of the environment's.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 
 from tatl_mj.sampling import schedule
 from tatl_mj.sampling.checks import IndexPolicy, check_indices
-from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, observed_state, simulator_for
+from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, Table, episode_simulator, observed_state
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import integer
 
@@ -73,13 +73,9 @@ def collect(
     n_parallel = (
         schedule.default_parallel(n, policy is None) if n_parallel is None else integer("", "n_parallel", n_parallel, 1)
     )
-    if max_episode_steps is not None:
-        integer("", "max_episode_steps", max_episode_steps, 1)
-    sim = simulator_for(domain, task, task_kwargs, n_threads)
-    if sim.table is not None:
-        return _collect_table(sim, n, seed, policy, max_episode_steps)
+    sim = episode_simulator(domain, task, task_kwargs, n_threads, max_episode_steps)
     if not sim.fast:
-        return _collect_env(sim, n, seed, policy, max_episode_steps)
+        return _collect_loop(sim, n, seed, policy, max_episode_steps)
     limit = sim.step_limit(max_episode_steps)
     # Random episodes of a task last as long in every collection: each one starts its
     # estimates of their lengths from all the earlier ones (a speed choice only).
@@ -295,23 +291,36 @@ def _assemble(chunks: list[tuple[np.ndarray, ...]], n: int) -> Transitions:
     return Transitions(*fields)
 
 
-def _collect_env(
+def _collect_loop(
     sim: Simulator,
     n: int,
     seed: int,
     policy: IndexPolicy | None,
     max_episode_steps: int | None,
 ) -> Transitions:
-    """collect() through one environment (time-varying models, tasks without physics);
-    random actions from ``np.random.default_rng(seed)``, one a step."""
+    """collect() through one environment (time-varying models, tasks without physics),
+    random actions from ``np.random.default_rng(seed)``, one a step; a task with a known
+    table (:class:`Table`) looks its steps up instead, with the same resets, random
+    actions and policy calls in the same order, so the same transitions."""
+    env, n_actions, table = sim.make_env(seed), len(sim.actions), sim.table
+    if table is None:
+        if policy is None:
+            rng = np.random.default_rng(seed)
+            choose = lambda state: int(rng.integers(n_actions))  # noqa: E731
+        else:
+            choose = _policy_choice(policy, n_actions)
+        transitions = _environment_loop(*_stepping(env, sim.actions), choose, n, max_episode_steps)
+        SUBSTEPS[sim.key] += n * sim.substeps
+        return transitions
     if policy is None:
-        rng, n_actions = np.random.default_rng(seed), len(sim.actions)
-        choose = lambda state: int(rng.integers(n_actions))  # noqa: E731
+        # One action per transition, drawn one at a time above: a Generator gives the
+        # same integers in one call.
+        drawn = iter(np.random.default_rng(seed).integers(n_actions, size=n).tolist())
+        choose = lambda cell: next(drawn)  # noqa: E731
     else:
-        choose = _policy_choice(policy, len(sim.actions))
-    transitions = _environment_loop(sim.make_env(seed), sim.actions, n, choose, max_episode_steps)
-    SUBSTEPS[sim.key] += n * sim.substeps
-    return transitions
+        by_state = _policy_choice(policy, n_actions)
+        choose = lambda cell: by_state(table.states[cell].copy())  # noqa: E731
+    return _environment_loop(*_table_stepping(env, table), choose, n, table.episode_limit(max_episode_steps))
 
 
 def _policy_choice(policy: IndexPolicy, n_actions: int) -> Callable[[np.ndarray], int]:
@@ -319,93 +328,66 @@ def _policy_choice(policy: IndexPolicy, n_actions: int) -> Callable[[np.ndarray]
     return lambda state: int(check_indices(policy(state[None]), 1, n_actions)[0])
 
 
-def _environment_loop(
-    env: dm_env.Environment,
-    actions: np.ndarray,
-    n: int,
-    choose: Callable[[np.ndarray], int],
-    max_episode_steps: int | None,
-) -> Transitions:
-    """``n`` transitions of ``env``, episode after episode from its resets, taking
-    ``actions[choose(state)]``; the last episode is cut at ``n``."""
-    state = observed_state(env.reset())
-    d = len(state)
-    out = {
-        "states": np.empty((n, d)),
-        "actions": np.empty(n, np.int64),
-        "rewards": np.empty(n),
-        "next_states": np.empty((n, d)),
-        "absorbing": np.zeros(n, bool),
-        "last": np.zeros(n, bool),
-    }
-    i = 0
-    while i < n:
-        if i:
-            state = observed_state(env.reset())
-        steps = 0
-        while i < n:
-            a = choose(state)
-            timestep = env.step(actions[a])
-            steps += 1
-            next_state = observed_state(timestep)
-            out["states"][i], out["actions"][i], out["next_states"][i] = state, a, next_state
-            out["rewards"][i] = timestep.reward
-            out["absorbing"][i] = timestep.last() and timestep.discount == 0.0
-            out["last"][i] = timestep.last() or steps == max_episode_steps
-            i += 1
-            if out["last"][i - 1]:
-                break
-            state = next_state
-    out["last"][-1] = True
-    return Transitions(**out)
+Reset = Callable[[], Any]
+"""Starts an episode; returns its first state (a key of the stepping: a state vector or a cell)."""
+Step = Callable[[Any, int], tuple[Any, float, bool, bool]]
+"""``step(state, a)`` -> (next state, reward, absorbing, the task ended the episode)."""
 
 
-def _collect_table(
-    sim: Simulator,
-    n: int,
-    seed: int,
-    policy: IndexPolicy | None,
-    max_episode_steps: int | None,
-) -> Transitions:
-    """:func:`_collect_env` on the task's known table (:class:`Table`): the same resets,
-    random actions and policy calls, in the same order, so the same transitions."""
-    table = sim.table
-    assert table is not None
-    env = sim.make_env(seed)
-    n_actions = len(sim.actions)
-    # One action per transition, as _collect_env draws them one at a time: a Generator
-    # gives the same integers in one call.
-    drawn = np.random.default_rng(seed).integers(n_actions, size=n).tolist() if policy is None else None
-    limit = table.episode_limit(max_episode_steps)
+def _stepping(env: dm_env.Environment, actions: np.ndarray) -> tuple[Reset, Step, Callable[[list], np.ndarray]]:
+    """``env``'s resets and steps taking ``actions[a]``, over state vectors."""
+
+    def step(state: np.ndarray, a: int) -> tuple[np.ndarray, float, bool, bool]:
+        timestep = env.step(actions[a])
+        # A copy: the records keep every state, and an observation may be a view of the physics.
+        return (
+            observed_state(timestep).copy(),
+            timestep.reward,
+            timestep.last() and timestep.discount == 0.0,
+            timestep.last(),
+        )
+
+    return lambda: observed_state(env.reset()).copy(), step, lambda states: np.asarray(states, np.float64)
+
+
+def _table_stepping(env: dm_env.Environment, table: Table) -> tuple[Reset, Step, Callable[[list], np.ndarray]]:
+    """``env``'s resets and ``table``'s steps, over cells."""
     next_list, reward_list, absorbing_list = table.next_list, table.reward_list, table.absorbing_list
-    cells, next_cells, actions, rewards = [0] * n, [0] * n, [0] * n, [0.0] * n
+
+    def step(c: int, a: int) -> tuple[int, float, bool, bool]:
+        return next_list[c][a], reward_list[c][a], absorbing_list[c][a], absorbing_list[c][a]
+
+    return lambda: table.cell(env.reset()), step, lambda cells: table.states[cells]
+
+
+def _environment_loop(
+    reset: Reset,
+    step: Step,
+    states_of: Callable[[list], np.ndarray],
+    choose: Callable[[Any], int],
+    n: int,
+    limit: int | None,
+) -> Transitions:
+    """``n`` transitions, episode after episode from ``reset()``, taking ``choose(state)``
+    through ``step``; an episode also ends after ``limit`` steps, the last one is cut
+    at ``n``. ``states_of`` turns the recorded states (or cells) into the (n, d) field."""
+    states, actions, rewards, next_states = [None] * n, np.empty(n, np.int64), np.empty(n), [None] * n
     absorbing, last = np.zeros(n, bool), np.zeros(n, bool)
     i = 0
     while i < n:
-        c, steps = table.cell(env.reset()), 0
+        state, steps = reset(), 0
         while i < n:
-            if drawn is not None:
-                a = drawn[i]
-            else:
-                a = int(check_indices(policy(table.states[c : c + 1].copy()), 1, n_actions)[0])
-            nxt = next_list[c][a]
+            a = choose(state)
+            next_state, rewards[i], absorbing[i], ended = step(state, a)
             steps += 1
-            cells[i], actions[i], rewards[i], next_cells[i] = c, a, reward_list[c][a], nxt
-            absorbing[i] = absorbing_list[c][a]
-            last[i] = absorbing[i] or steps == limit
+            states[i], actions[i], next_states[i] = state, a, next_state
+            last[i] = ended or steps == limit
             i += 1
             if last[i - 1]:
                 break
-            c = nxt
+            state = next_state
     last[-1] = True
-    return Transitions(
-        table.states[cells],
-        np.asarray(actions, np.int64),
-        np.asarray(rewards, np.float64),
-        table.states[next_cells],
-        absorbing,
-        last,
-    )
+    return Transitions(states_of(states), actions, rewards, states_of(next_states), absorbing, last)
 
 
 def policy_transitions(
@@ -427,4 +409,4 @@ def policy_transitions(
     n = integer("", "n", n, 1)
     if max_episode_steps is not None:
         integer("", "max_episode_steps", max_episode_steps, 1)
-    return _environment_loop(env, actions, n, _policy_choice(policy, len(actions)), max_episode_steps)
+    return _environment_loop(*_stepping(env, actions), _policy_choice(policy, len(actions)), n, max_episode_steps)

@@ -14,7 +14,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from tatl_mj.sampling.checks import ValuePolicy, check_values
-from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, observed_state, simulator_for
+from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, episode_simulator, observed_state, simulator_for
 from tatl_mj.validation import integer
 
 Joint = Callable[[list[int], list[np.ndarray]], list[np.ndarray]]
@@ -71,15 +71,11 @@ def evaluate_policies(
     or their known table evaluate the policies one after another.
     """
     n_episodes = integer("", "n_episodes", n_episodes, 1)
-    if max_episode_steps is not None:
-        integer("", "max_episode_steps", max_episode_steps, 1)
     if not policies:
         raise ValueError("evaluate_policies needs at least one policy")
-    sim = simulator_for(domain, task, task_kwargs, n_threads)
-    if sim.table is not None:
-        return [_evaluate_table(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
+    sim = episode_simulator(domain, task, task_kwargs, n_threads, max_episode_steps)
     if not sim.fast:
-        return [_evaluate_env(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
+        return [_evaluate_loop(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
     limit = sim.step_limit(max_episode_steps)
     if not np.isfinite(limit):
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
@@ -158,7 +154,7 @@ def evaluation_randoms(seed: int, n_episodes: int) -> list[np.random.Generator]:
     return [np.random.default_rng(child) for child in parent.spawn(n_episodes)]
 
 
-def _evaluate_env(
+def _evaluate_loop(
     sim: Simulator,
     policy: ValuePolicy,
     n_episodes: int,
@@ -166,47 +162,55 @@ def _evaluate_env(
     max_episode_steps: int | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Lockstep over one environment per episode, seeded ``(seed, i)``: its start
-    and any noise are episode i's own, as on the batched path (from another stream)."""
+    and any noise are episode i's own, as on the batched path (from another stream).
+    A task with a known table (:class:`Table`) takes the same starts and policy calls,
+    each live episode's step looked up in the table."""
     envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
-    states = np.stack([observed_state(e.reset()) for e in envs])
+    firsts = [e.reset() for e in envs]
+    if sim.table is None:
+        states, step = np.stack([observed_state(f) for f in firsts]), _env_step(sim, envs)
+        limit = np.inf if max_episode_steps is None else max_episode_steps
+    else:
+        cells = np.array([sim.table.cell(f) for f in firsts], np.int64)
+        states, step = sim.table.states[cells], _table_step(sim, envs, cells)
+        limit = sim.table.episode_limit(max_episode_steps)
     returns = np.zeros(n_episodes)
     lengths = np.zeros(n_episodes, np.int64)
     live = np.arange(n_episodes)
     while len(live):
         values = check_values(policy(states[live]), len(live), sim)
-        still = []
-        for j, i in enumerate(live):
-            timestep = envs[i].step(values[j])
-            returns[i] += timestep.reward
-            lengths[i] += 1
-            states[i] = observed_state(timestep)
-            if not (timestep.last() or lengths[i] == max_episode_steps):
-                still.append(i)
-        live = np.asarray(still, np.int64)
-    SUBSTEPS[sim.key] += int(lengths.sum()) * sim.substeps
+        rewards, states[live], ended = step(live, values)
+        returns[live] += rewards
+        lengths[live] += 1
+        live = live[~(ended | (lengths[live] >= limit))]
+    if sim.table is None:
+        SUBSTEPS[sim.key] += int(lengths.sum()) * sim.substeps
     return returns, lengths
 
 
-def _evaluate_table(
-    sim: Simulator,
-    policy: ValuePolicy,
-    n_episodes: int,
-    seed: int,
-    max_episode_steps: int | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_evaluate_env` on the task's known table (:class:`Table`): the same starts
-    and policy calls, each live episode's step looked up."""
+LockstepStep = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+"""``step(live, values)`` -> the live episodes' (rewards, next states, whether the task ended them)."""
+
+
+def _env_step(sim: Simulator, envs: list) -> LockstepStep:
+    """Each live episode's step through its own environment."""
+
+    def step(live: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        timesteps = [envs[i].step(values[j]) for j, i in enumerate(live)]
+        rewards = np.array([timestep.reward for timestep in timesteps], np.float64)
+        next_states = np.stack([observed_state(timestep) for timestep in timesteps])
+        return rewards, next_states, np.array([timestep.last() for timestep in timesteps], bool)
+
+    return step
+
+
+def _table_step(sim: Simulator, envs: list, cells: np.ndarray) -> LockstepStep:
+    """Each live episode's step looked up in the task's table; ``cells`` (each episode's) in place."""
     table = sim.table
     assert table is not None
-    envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
-    cells = np.array([table.cell(e.reset()) for e in envs], np.int64)
-    states = table.states[cells]
-    returns = np.zeros(n_episodes)
-    lengths = np.zeros(n_episodes, np.int64)
-    limit = table.episode_limit(max_episode_steps)
-    live = np.arange(n_episodes)
-    while len(live):
-        values = check_values(policy(states[live]), len(live), sim)[:, 0]
+
+    def step(live: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        values = values[:, 0]
         valid = np.isfinite(values) & (values >= 0) & (values < len(sim.actions))
         valid[valid] = values[valid] == np.floor(values[valid])
         if not valid.all():  # the environment's own error for an action it refuses
@@ -214,13 +218,10 @@ def _evaluate_table(
             envs[live[j]].step(values[j : j + 1])
             raise ValueError(f"{sim.domain} action must be an index in 0..{len(sim.actions) - 1}, got {values[j]}")
         c, a = cells[live], values.astype(np.int64)
-        returns[live] += table.reward[c, a]
-        lengths[live] += 1
         cells[live] = table.next_state[c, a]
-        states[live] = table.states[cells[live]]
-        ended = table.absorbing[c, a] | (lengths[live] >= limit)
-        live = live[~ended]
-    return returns, lengths
+        return table.reward[c, a], table.states[cells[live]], table.absorbing[c, a]
+
+    return step
 
 
 def start_states(

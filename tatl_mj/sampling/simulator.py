@@ -330,6 +330,15 @@ def simulator_for(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_
     return _cached(domain, task, key, n_threads)
 
 
+def episode_simulator(
+    domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int, max_episode_steps: int | None
+) -> Simulator:
+    """:func:`simulator_for`, for episodes that end after ``max_episode_steps`` (checked; None: the task's limit)."""
+    if max_episode_steps is not None:
+        integer("", "max_episode_steps", max_episode_steps, 1)
+    return simulator_for(domain, task, task_kwargs, n_threads)
+
+
 def is_batched(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> bool:
     """Whether ``domain/task`` runs on the batched MuJoCo path (else an environment loop)."""
     return simulator_for(domain, task, task_kwargs, 1).fast

@@ -26,10 +26,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.features import (
     Features,
     LinearFeatures,
@@ -253,4 +254,62 @@ def learn_apprentice(
     return apprentice, total
 
 
-__all__ = ["Apprentice", "fit_apprentice", "learn_apprentice"]
+def state_snap(target: TaskDescription) -> Callable[[np.ndarray], np.ndarray] | None:
+    """How a model's predicted states are put back on the target's state set, or None.
+
+    A task that takes indices lives on cells: predictions go to the nearest of its
+    known model's cells, or without one are rounded into its state box. A
+    continuous task's predictions stand as they are (None).
+    """
+    if not target.discrete:
+        return None
+    cells = CellMap(target.known_model()[3]) if target.known_model is not None else None
+
+    def snap(states: np.ndarray) -> np.ndarray:
+        if cells is None:
+            return np.clip(np.rint(states), target.state_low, target.state_high)
+        return cells.cells[cells.nearest(states)].astype(np.float64)
+
+    return snap
+
+
+def model_return(
+    model: Any,
+    policy: Callable[[np.ndarray], np.ndarray],
+    *,
+    starts: np.ndarray,
+    reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    action_values: np.ndarray,
+    steps: int,
+    snap: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> float:
+    """U_Mhat(pi): ``policy``'s mean return when ``model`` stands in for the target (Algorithm 2).
+
+    From each of ``starts`` (N, d), ``steps`` steps of the policy on
+    ``model.predict(states, action_values)``, each scored by the target task's own
+    ``reward(states, actions, next_states) -> (rewards, absorbing)``; an episode
+    earns nothing after its absorbing step. ``policy`` returns action values (N, m)
+    or indices into ``action_values`` (N,); ``snap`` (:func:`state_snap`) puts the
+    predictions back on the target's states. NaN where the model diverges.
+    """
+    states, total = starts.copy(), np.zeros(len(starts))
+    alive = np.ones(len(starts), dtype=bool)
+    with np.errstate(all="ignore"):
+        for _ in range(steps):
+            action = policy(states)
+            values = action if action.ndim == 2 else action_values[action]
+            next_states = model.predict(states, values)
+            if not np.all(np.isfinite(next_states)):
+                return float("nan")  # the model diverged
+            if snap is not None:
+                next_states = snap(next_states)
+            rewards, ended = reward(states, action, next_states)
+            total += np.where(alive, rewards, 0.0)
+            alive &= ~ended
+            states = next_states
+            if not alive.any():
+                break
+    return float(total.mean())
+
+
+__all__ = ["Apprentice", "fit_apprentice", "learn_apprentice", "model_return", "state_snap"]

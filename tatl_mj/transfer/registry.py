@@ -12,10 +12,13 @@ import dataclasses
 import functools
 from typing import Any, Callable
 
-from tatl_mj.transfer.horizon import HorizonTATL
-from tatl_mj.transfer.method import RL, TATL, UMATL, ProjectedSource, TransferMethod, UMATLPrior
-from tatl_mj.transfer.model_based import ApprenticeFQI
-from tatl_mj.transfer.tabular import OneStepOracle, ReplanTATL
+from tatl_mj.transfer.method import TransferMethod
+from tatl_mj.transfer.methods.horizon import HorizonTATL
+from tatl_mj.transfer.methods.model_based import ApprenticeFQI
+from tatl_mj.transfer.methods.projected import ProjectedSource
+from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanTATL
+from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
+from tatl_mj.transfer.methods.tatl import TATL
 
 METHODS: dict[str, Callable[..., TransferMethod]] = {
     # The paper's rule (Algorithms 1 and 2) and its two baselines.

@@ -20,7 +20,9 @@ import numpy as np
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.method import TATL, TargetFQI, TransferProblem, check_features
+from tatl_mj.transfer.method import TransferProblem, check_features
+from tatl_mj.transfer.methods.target_fqi import TargetFQI
+from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import integer, number
 

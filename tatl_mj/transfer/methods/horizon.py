@@ -70,7 +70,8 @@ from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import as_states, periodic_difference, periodic_mask
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.method import TATL, TransferProblem
+from tatl_mj.transfer.method import TransferProblem
+from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import choice, integer, is_integer, number

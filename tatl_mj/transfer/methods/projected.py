@@ -1,0 +1,22 @@
+"""``projected-source``: the mapped source policy as it is, a reference that learns nothing."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from tatl_mj.transfer.method import Policy, TransferProblem
+from tatl_mj.transitions import Transitions
+
+
+@dataclasses.dataclass(frozen=True)
+class ProjectedSource:
+    """The mapped source policy pi*_S(chi_plus(s_T)) without adaptation: a reference, no target samples."""
+
+    name: str = "projected-source"
+    uses_samples = False  # evaluated once, whatever the budget
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        return problem.projected_source_policy()
+
+
+__all__ = ["ProjectedSource"]

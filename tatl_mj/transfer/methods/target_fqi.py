@@ -1,0 +1,307 @@
+"""Target Fitted Q-Iteration and the methods built on it: UMA-TL, its prior variant, and RL.
+
+- **UMA-TL** (Ammar et al. 2015): target FQI whose initial Q-function is the source's,
+  seen through the inter-task mapping, ``Q_0(s_T, a) = Q_S(chi_plus(s_T), a)``
+  (:class:`MappedQ`); it then learns from target samples like plain FQI.
+- **UMA-TL-prior**: the mapped source Q stays in every fit (not the paper's baseline).
+- **RL**: target FQI from scratch (Q_0 = 0), no transfer.
+
+:class:`TargetFQI` is the one learner (with its data protocols) of the three methods
+:class:`UMATL`, :class:`UMATLPrior` and :class:`RL`; :func:`uma_tl` and :func:`rl` are
+the same two fits as plain functions of the data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from typing import Callable
+
+import numpy as np
+
+from tatl_mj.description import TaskDescription
+from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, Regressor, fitted_q_iteration, make_regressor
+from tatl_mj.transfer.method import Policy, TransferProblem, check_features
+from tatl_mj.transfer.placebo import SOURCES
+from tatl_mj.transitions import Transitions
+from tatl_mj.validation import choice, integer, number
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MappedQ:
+    """``Q(s_T, a) = source_q(chi_plus(s_T), a)``: the source Q seen from the target."""
+
+    source_q: QFunction
+    mapping: Mapping
+
+    @property
+    def n_actions(self) -> int:
+        return self.source_q.n_actions
+
+    def values(self, states: np.ndarray) -> np.ndarray:
+        return self.source_q.values(self.mapping.chi_plus(states))
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        return np.argmax(self.values(states), axis=1).astype(np.int64)
+
+
+def uma_tl(
+    source_q: QFunction,
+    mapping: Mapping,
+    target_transitions: Transitions,
+    n_actions: int,
+    regressor: Regressor,
+    gamma: float,
+    iterations: int,
+    rng: np.random.Generator | None = None,
+) -> QFunction:
+    """Target FQI initialised with the mapped source Q-function (UMA-TL)."""
+    if source_q.n_actions != n_actions:
+        raise ValueError(f"source_q has {source_q.n_actions} actions, the target has n_actions={n_actions}")
+    return fitted_q_iteration(
+        target_transitions,
+        n_actions,
+        regressor,
+        gamma,
+        iterations,
+        initial_q=MappedQ(source_q, mapping),
+        rng=rng,
+    )
+
+
+def rl(
+    target_transitions: Transitions,
+    n_actions: int,
+    regressor: Regressor,
+    gamma: float,
+    iterations: int,
+    rng: np.random.Generator | None = None,
+) -> QFunction:
+    """Target FQI from scratch (the no-transfer baseline)."""
+    return fitted_q_iteration(target_transitions, n_actions, regressor, gamma, iterations, rng=rng)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GreedyPolicy:
+    """The greedy policy of a target Q-function, as action values (or indices if discrete)."""
+
+    q: QFunction
+    target_actions: np.ndarray
+    discrete: bool = False
+    samples_used: int | None = None  # shared-stream samples it learned from (None: the whole budget)
+
+    def __call__(self, target_states: np.ndarray) -> np.ndarray:
+        idx = self.q.greedy(target_states)
+        return (
+            idx
+            if self.discrete
+            else np.asarray(self.target_actions, dtype=np.float64).reshape(len(self.target_actions), -1)[idx]
+        )
+
+
+DATA_PROTOCOLS = ("shared", "reset", "online")
+"""Where a target learner's transitions come from (``TargetFQI.data``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TargetFQI:
+    """Target Fitted Q-Iteration, the learner of :class:`UMATL`, :class:`RL` and their kin.
+
+    Attributes:
+      features: basis of the linear regressor (a features spec, default linear);
+        refused for extra-trees, which split raw states.
+      regressor: ``"linear"`` or ``"extra_trees"``.
+      ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
+      n_estimators: extra-trees' tree count (default 50); refused for linear.
+      gamma, iterations: FQI's discount and iteration count.
+      data: where its n target transitions come from (n: the budget):
+        ``"shared"``, the first n of the random-policy stream every method shares;
+        ``"reset"``, n one-step transitions from states spread over the target's
+        reset box (privileged: a simulator reset that a robot lacks);
+        ``"online"``, epsilon-greedy episodes from the task's own start states,
+        refitting as the data double (random actions for the first
+        ``online_batch``), no resets to chosen states.
+      epsilon: the online protocol's exploration rate.
+      online_batch: the online protocol's first, random-policy collection.
+      source: ``"trained"`` or ``"placebo"`` (see :class:`TATL`); only for learners
+        that use the mapped source Q (UMA-TL and its kin).
+    """
+
+    features: dict | None = None
+    regressor: str = "linear"
+    ridge: float | None = None
+    n_estimators: int | None = None
+    gamma: float = 0.95
+    iterations: int = 20
+    data: str = "shared"
+    epsilon: float = 0.1
+    online_batch: int = 100
+    source: str = "trained"
+    name: str = "target-fqi"
+    source_use = "none"  # how the mapped source Q enters: "none", "initial" (Q_0) or "prior" (every fit)
+
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
+        for field in ("ridge", "features"):
+            if getattr(self, field) is not None and self.regressor != "linear":
+                raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
+        if self.n_estimators is not None:
+            if self.regressor != "extra_trees":
+                raise ValueError(f"{owner}.n_estimators applies to regressor 'extra_trees' only")
+            integer(owner, "n_estimators", self.n_estimators, 1)
+        if self.ridge is not None:
+            number(owner, "ridge", self.ridge, 0.0)
+        if self.regressor == "linear":
+            check_features(owner, "features", self.linear_features)
+        number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
+        integer(owner, "iterations", self.iterations, 1)
+        choice(owner, "data", self.data, DATA_PROTOCOLS)
+        number(owner, "epsilon", self.epsilon, 0.0, 1.0)
+        integer(owner, "online_batch", self.online_batch, 1)
+        choice(owner, "source", self.source, SOURCES)
+        if self.source == "placebo" and self.source_use == "none":
+            raise ValueError(f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none")
+
+    @property
+    def linear_features(self) -> dict:
+        return {"kind": "linear"} if self.features is None else self.features
+
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
+        if self.regressor == "linear":
+            check_features(type(self).__name__, "features", self.linear_features, target.state_dim)
+        if self.data == "reset" and target.reset_low is None and not (target.discrete and target.known_model):
+            raise ValueError(
+                f"{type(self).__name__}.data = 'reset' needs a reset box; {target.domain}/{target.task} declares none"
+            )
+
+    def regressor_spec(self) -> dict:
+        spec: dict = {"kind": self.regressor, "features": self.linear_features}
+        if self.regressor == "linear":
+            spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
+        elif self.n_estimators is not None:
+            spec["n_estimators"] = self.n_estimators
+        return spec
+
+    def fqi(self, problem: TransferProblem, data: Transitions, rng: np.random.Generator) -> QFunction:
+        """FQI on ``data``, with the mapped source Q as this learner's ``source_use`` says."""
+        regressor = make_regressor(self.regressor_spec(), data.state_dim)
+        mapped = MappedQ(problem.source_q, problem.mapping) if self.source_use != "none" else None
+        return fitted_q_iteration(
+            data,
+            problem.n_actions,
+            regressor,
+            self.gamma,
+            self.iterations,
+            initial_q=mapped if self.source_use == "initial" else None,
+            prior_q=mapped if self.source_use == "prior" else None,
+            rng=rng,
+        )
+
+    def fit(self, problem: TransferProblem, data: Transitions, rng: np.random.Generator) -> QFunction:
+        """The Q-function this learner makes of its target transitions (a subclass's own step)."""
+        return self.fqi(problem, data, rng)
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        rng = np.random.default_rng(problem.seed)
+        n = len(target_samples)
+        if self.data == "shared":
+            q = self.fit(problem, target_samples, rng)
+        elif self.data == "reset":
+            if problem.reset_samples is None:
+                raise ValueError(f"{type(self).__name__}(data='reset') needs the problem's reset_samples")
+            q = self.fit(problem, problem.reset_samples(n), rng)
+        else:
+            q = self._online(problem, n, rng)
+        used = n if self.data == "shared" else 0  # the others draw their own, counted by the hooks
+        return GreedyPolicy(q, problem.target.action_values, problem.target.discrete, samples_used=used)
+
+    def _online(self, problem: TransferProblem, n: int, rng: np.random.Generator) -> QFunction:
+        """Epsilon-greedy FQI: random episodes first, then the data doubled by the current greedy policy.
+
+        A budget's rounds up to where its collection sizes part from a smaller
+        budget's are that budget's very rounds (each round's data, fit and draws
+        follow from the sizes so far and the seed alone), so where the problem can
+        charge replays, each round is kept with the problem and replayed: its data
+        charged again, its fit and the generator's state after it restored.
+        """
+        if problem.episode_samples is None:
+            raise ValueError(f"{type(self).__name__}(data='online') needs the problem's episode_samples")
+        memo = problem.replays if problem.charge is not None else None
+        sizes: tuple[int, ...] = ()
+        data: Transitions | None = None
+        q: QFunction | None = None
+        round_ = 0
+        while True:
+            size = min(n, self.online_batch) if data is None else min(len(data), n - len(data))
+            sizes += (size,)
+            entry = memo.get((id(self), sizes)) if memo is not None else None
+            if entry is not None and entry[0] is self:
+                _, data, q, state, collected = entry
+                rng.bit_generator.state = state
+                problem.charge(collected)  # type: ignore[misc]
+            else:
+                with warnings.catch_warnings(record=True) as caught:
+                    policy = None if q is None else _epsilon_greedy(q, self.epsilon, rng)
+                    more = problem.episode_samples(policy, size, round_)
+                    data = more if data is None else Transitions.concatenate([data, more])
+                    q = self.fit(problem, data, rng)
+                for warning in caught:
+                    warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+                if memo is not None and not caught:  # a replay would not repeat a warning
+                    memo[(id(self), sizes)] = (self, data, q, rng.bit_generator.state, len(more))
+            if len(data) >= n:
+                return q
+            round_ += 1
+
+
+def _epsilon_greedy(q: QFunction, epsilon: float, rng: np.random.Generator) -> Callable[[np.ndarray], np.ndarray]:
+    """Index policy: greedy in ``q``, a uniformly random action with probability ``epsilon``."""
+
+    def policy(states: np.ndarray) -> np.ndarray:
+        greedy = q.greedy(states)
+        explore = rng.random(len(greedy)) < epsilon
+        return np.where(explore, rng.integers(q.n_actions, size=len(greedy)), greedy)
+
+    return policy
+
+
+@dataclasses.dataclass(frozen=True)
+class UMATL(TargetFQI):
+    """UMA-TL: target FQI initialised with the mapped source Q (Ammar et al. 2015).
+
+    The mapped source Q is only the first iteration's bootstrap: after enough
+    iterations its influence is gone (see :class:`UMATLPrior`)."""
+
+    name: str = "uma-tl"
+    source_use = "initial"
+
+
+@dataclasses.dataclass(frozen=True)
+class UMATLPrior(TargetFQI):
+    """UMA-TL whose mapped source Q stays in every fit: FQI on the residual from it,
+    so a misleading source can show as negative transfer (not the paper's baseline)."""
+
+    name: str = "uma-tl-prior"
+    source_use = "prior"
+
+
+@dataclasses.dataclass(frozen=True)
+class RL(TargetFQI):
+    """No transfer: target FQI from scratch."""
+
+    name: str = "rl"
+
+
+__all__ = [
+    "DATA_PROTOCOLS",
+    "RL",
+    "UMATL",
+    "GreedyPolicy",
+    "MappedQ",
+    "TargetFQI",
+    "UMATLPrior",
+    "rl",
+    "uma_tl",
+]

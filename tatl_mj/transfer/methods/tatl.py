@@ -1,0 +1,138 @@
+"""``ta-tl``: Target Apprentice TL, the paper's rule as a method.
+
+:class:`TATL` fits the target apprentice ``s' = W phi(s) + B a`` by Algorithm 2
+(``tatl_mj.transfer.apprentice``) and returns Algorithm 1's policy
+(``tatl_mj.transfer.tatl``) built on it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+from tatl_mj.description import TaskDescription
+from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
+from tatl_mj.transfer.features import Features, make_features
+from tatl_mj.transfer.method import Policy, TransferProblem, check_features
+from tatl_mj.transfer.placebo import SOURCES
+from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
+from tatl_mj.transitions import Transitions
+from tatl_mj.validation import choice, integer, number
+
+
+@dataclasses.dataclass(frozen=True)
+class TATL:
+    """Target Apprentice TL, the paper's rule: apprentice by Algorithm 2, policy by Algorithm 1.
+
+    Attributes:
+      apprentice: basis phi of the apprentice s' = W phi(s) + B a (a features spec,
+        ``tatl_mj.transfer.features.make_features``).
+      ridge: ridge of the apprentice's least squares (0: plain least squares).
+      zeta: Algorithm 2's threshold; the apprentice grows by ``batch`` samples until
+        the utility gap is <= zeta. None fits it on every sample.
+      gap: ``"absolute"``, the paper's one-sided U_M - U_Mhat <= zeta (in return
+        units), or ``"relative"``, |U_M - U_Mhat| / |U_M| <= zeta.
+      batch: Algorithm 2's sample increment (None: all samples at once).
+      actions: ``"discrete"``: the action is snapped to the target's discrete
+        action set, the one the FQI baselines choose from, so every method is
+        compared within the same actions; ``"continuous"``: any value within the
+        actuator limits (a labelled variant).
+      adaptive_actions: an explicit admissible set A_ad (values of a one-dimensional
+        actuator) to snap to instead.
+      source: ``"trained"``, the source Q of Phase I, or ``"placebo"``, an untrained
+        one of its shape (``tatl_mj.transfer.placebo``): the placebo-source ablation.
+    """
+
+    apprentice: dict = dataclasses.field(default_factory=lambda: {"kind": "linear"})
+    ridge: float = 0.0
+    zeta: float | None = 0.1
+    gap: str = "absolute"
+    batch: int | None = None
+    actions: str = "discrete"
+    adaptive_actions: tuple[float, ...] = ()
+    source: str = "trained"
+    name: str = "ta-tl"
+
+    GAPS = ("absolute", "relative")
+    ACTION_SETS = ("discrete", "continuous")
+
+    def __post_init__(self) -> None:
+        owner = type(self).__name__
+        check_features(owner, "apprentice", self.apprentice)
+        choice(owner, "gap", self.gap, self.GAPS)
+        choice(owner, "actions", self.actions, self.ACTION_SETS)
+        choice(owner, "source", self.source, SOURCES)
+        number(owner, "ridge", self.ridge, 0.0)
+        if self.zeta is not None:
+            number(owner, "zeta", self.zeta, 0.0, low_open=True)
+        if self.batch is not None:
+            integer(owner, "batch", self.batch, 1)
+        for i, value in enumerate(self.adaptive_actions):
+            number(owner, f"adaptive_actions[{i}]", value)
+
+    def check(self, source: TaskDescription, target: TaskDescription) -> None:
+        """Settings that need the tasks' descriptions (basis size, actuator)."""
+        check_features(type(self).__name__, "apprentice", self.apprentice, target.state_dim)
+        if self.adaptive_actions and target.discrete:
+            raise ValueError(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
+
+    def features(self, target: TaskDescription) -> Features:
+        return make_features(self.apprentice, target.state_dim)
+
+    def fit_apprentice(self, problem: TransferProblem, target_samples: Transitions) -> tuple[Apprentice, int]:
+        """The apprentice on ``target_samples``: by Algorithm 2 where the problem can evaluate
+        the utility gap and ``zeta`` is set, else on every sample. Returns it and the samples used."""
+        target = problem.target
+        actions = target.action_values
+        periodic = target.periodic if any(target.periodic) else None
+        if self.zeta is None or not problem.has_utility_gap:
+            apprentice = fit_apprentice(
+                target_samples.states,
+                actions[target_samples.actions],
+                target_samples.next_states,
+                self.features(target),
+                self.ridge,
+                periodic=periodic,
+            )
+            return apprentice, len(target_samples)
+        return learn_apprentice(
+            target_samples,
+            actions,
+            self.features(target),
+            functools.partial(problem.utility_gap, kind=self.gap),
+            self.zeta,
+            self.batch or len(target_samples),
+            self.ridge,
+            periodic=periodic,
+        )
+
+    def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
+        apprentice, used = self.fit_apprentice(problem, target_samples)
+        target = problem.target
+        common = dict(
+            source_q=problem.source_q,
+            mapping=problem.mapping,
+            source_step=problem.source_step,
+            apprentice=apprentice,
+            source_actions=problem.source.action_values,
+            target_actions=target.action_values,
+            target_low=target.action_low,
+            target_high=target.action_high,
+            adaptive_actions=self.admissible_actions(target),
+            samples_used=used,
+        )
+        return DiscreteTATLPolicy(**common) if target.discrete else TATLPolicy(**common)
+
+    def admissible_actions(self, target: TaskDescription) -> np.ndarray | None:
+        """The set the action is snapped to: A_ad if given, the target's discrete
+        action set for ``actions = "discrete"``, else None (clipped only)."""
+        if self.adaptive_actions:
+            return np.asarray(self.adaptive_actions, dtype=np.float64).reshape(-1, 1)
+        if self.actions == "discrete" and not target.discrete:
+            return np.asarray(target.action_values, dtype=np.float64)
+        return None
+
+
+__all__ = ["TATL"]
