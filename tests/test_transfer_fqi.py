@@ -7,6 +7,7 @@ import scipy.linalg
 from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot
 from tatl_mj.transfer.fqi import (
     ExtraTrees,
+    LinearQ,
     LinearRegressor,
     TabularQ,
     fitted_q_iteration,
@@ -214,13 +215,15 @@ def _relative_error(new, old):
 
 def test_linear_fqi_on_samples_reproduces_the_per_iteration_least_squares():
     """Continuous states (no repeats): the sample path. RBF 6x6, ridge 1, 300 iterations of
-    gamma 0.99 from a non-zero Q_0; measured relative difference 3e-13."""
+    gamma 0.99 from a non-zero Q_0. The next states' values are single precision: each
+    iteration perturbs the targets by ~6e-8 relative, and the fixed point moves by at
+    most that over 1 - gamma = 0.01, so 1e-5 bounds it (measured 4e-7)."""
     data, _, _ = _double_integrator(3_000, seed=2)
     basis = RBF.grid([-1, -1], [1, 1], [6, 6], [0.35, 0.35])
     q0 = fitted_q_iteration(data, 3, LinearRegressor(basis, ridge=1.0), 0.9, 3)
     q = fitted_q_iteration(data, 3, LinearRegressor(basis, ridge=1.0), 0.99, 300, initial_q=q0)
     old = _reference_linear_fqi(data, 3, basis, 1.0, 0.99, 300, initial_q=q0)
-    assert _relative_error(q.weights, old) < 1e-8, _relative_error(q.weights, old)
+    assert _relative_error(q.weights, old) < 1e-5, _relative_error(q.weights, old)
 
 
 @pytest.mark.parametrize("ridge", [0.0, 1e-6, 1.0])
@@ -255,3 +258,16 @@ def test_one_hot_fqi_with_ridge_zero_is_q_iteration_on_the_empirical_model():
     q = fitted_q_iteration(data, 4, LinearRegressor(basis, ridge=0.0), gamma, 600)
     cells = np.stack(np.divmod(np.arange(n_states), 5), axis=1).astype(float)
     np.testing.assert_allclose(q.values(cells), exact, rtol=0, atol=1e-9)
+
+
+def test_one_hot_q_values_are_the_indicator_product_exactly():
+    """LinearQ on a OneHot basis reads weight columns instead of multiplying by phi: the
+    same numbers bit for bit, and the same refusal of a state off the grid."""
+    basis = OneHot(3, 4)
+    weights = np.random.default_rng(0).normal(size=(2, 12)) * 1e3
+    q = LinearQ(basis, weights)
+    cells = np.array([[0, 0], [2, 3], [1, 2], [1, 2]], float)
+    np.testing.assert_array_equal(q.values(cells), basis(cells) @ weights.T)
+    np.testing.assert_array_equal(q.greedy(cells), np.argmax(basis(cells) @ weights.T, axis=1))
+    with pytest.raises(ValueError, match="3 x 4 grid"):
+        q.values(np.array([[3.0, 0.0]]))
