@@ -349,19 +349,16 @@ def _iterate_on_samples(
 ) -> np.ndarray:
     """FQI sample by sample: per iteration one pass over the next-state features and one
     over the state features (both stored action-block-contiguous, transposed, so each
-    product is one BLAS call with a long inner dimension; the next states' in single
-    precision). With ``prior_taken`` (N,) and
+    product is one BLAS call with a long inner dimension). With ``prior_taken`` (N,) and
     ``prior_next`` (V, A) the weights fit the residual from that prior."""
     order = np.argsort(t.actions, kind="stable")
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
     blocks = [slice(int(bounds[a]), int(bounds[a + 1])) for a in range(n_actions)]
     phi_t = np.ascontiguousarray(phi_states[state_of[order]].T)  # (k, N)
-    # The next states' values, the larger product, in single precision: their rounding
-    # (~1e-7 relative) perturbs the targets y only, and a least-squares fit of a
-    # perturbation is no larger than it, so Q moves by as little; the state features
-    # stay double, since rounding Phi^T y itself would be amplified by an
-    # ill-conditioned Gram matrix. Half the bytes of the pass that binds an iteration.
-    phi_next_t = np.ascontiguousarray(phi_next[next_of[order]].T, dtype=np.float32)  # (k, N)
+    # Double precision throughout: next states are off the fitted samples, where a
+    # small-budget fit (fewer samples than features) amplifies any rounding, so
+    # single-precision next-state values turned some greedy policies into others.
+    phi_next_t = np.ascontiguousarray(phi_next[next_of[order]].T)  # (k, N)
     rewards = t.rewards[order]
     if prior_taken is not None:
         rewards = rewards - prior_taken[order]
@@ -374,7 +371,7 @@ def _iterate_on_samples(
         y = rewards + continues * best_next
         for a, block in enumerate(blocks):
             weights[a] = solve(a, phi_t[:, block] @ y[block])
-        best_next = (weights.astype(np.float32) @ phi_next_t + offset_t).max(axis=0)
+        best_next = (weights @ phi_next_t + offset_t).max(axis=0)
     return weights
 
 
