@@ -116,15 +116,22 @@ def random_policy(side: Side, seed: int) -> Callable[[np.ndarray], np.ndarray]:
 
 def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-episode returns and lengths of ``policy`` on the target task."""
+    return _on_target(spec, preset, [policy], seed)[0]
+
+
+def _on_target(
+    spec: ExperimentSpec, preset: Preset, policies: list[Callable], seed: int, joint: sampling.Joint | None = None
+) -> list[tuple[np.ndarray, np.ndarray]]:
     target = spec.target
-    return sampling.evaluate(
+    return sampling.evaluate_policies(
         target.domain,
         target.task,
-        policy,
+        policies,
         preset.evaluation_episodes,
         seed,
         task_kwargs=target.task_kwargs,
         max_episode_steps=preset.evaluation_steps,
+        joint=joint,
     )
 
 
@@ -134,7 +141,6 @@ def evaluate_curve(
     """Each policy's per-episode returns and lengths on the target task, from the same starts,
     all in one lockstep batch (a learning curve's budgets), and with ``record`` each one's
     per-episode (states, action values) lists for steadiness."""
-    target = spec.target
     together = horizon.shared_source(policies) or sampling.one_by_one(policies)
     calls: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in policies]
 
@@ -145,16 +151,7 @@ def evaluate_curve(
                 calls[b].append((np.array(s, dtype=np.float64), np.array(v, dtype=np.float64)))
         return values
 
-    results = sampling.evaluate_policies(
-        target.domain,
-        target.task,
-        policies,
-        preset.evaluation_episodes,
-        seed,
-        task_kwargs=target.task_kwargs,
-        max_episode_steps=preset.evaluation_steps,
-        joint=joint,
-    )
+    results = _on_target(spec, preset, policies, seed, joint)
     return [(r, n, per_episode(c, n) if record else None) for (r, n), c in zip(results, calls)]
 
 
@@ -585,36 +582,75 @@ def run_method(
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     ledger = Ledger()
     problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
-    target = problem.target
     hooks = method.contract(transfer)
-    data = hooks.data
-    eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
-    uses_samples = hooks.uses_samples
-    budgets = preset.target_budgets if uses_samples else preset.target_budgets[:1]
+    # A method that uses no target samples (an oracle, a reference) learns the same
+    # policy at every budget: it is learned and evaluated once and its point repeated.
+    budgets = preset.target_budgets if hooks.uses_samples else preset.target_budgets[:1]
     points, policies = [], []
     for budget in budgets:
-        ledger.new_budget()
-        start = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
-        learn_s = time.perf_counter() - start
-        used = method.samples_used(policy, budget) if uses_samples else 0
-        stream = used if data in STREAM_DATA else 0
+        point, policy = _learn_point(spec, preset, seed, transfer, artifacts, budget, problem, ledger, hooks)
+        points.append(point)
         policies.append(policy)
-        points.append(
-            {
-                "samples": int(budget),
-                # Algorithm 2 may stop before the budget: ``samples_used`` is what it kept.
-                "samples_used": used,
-                # Every real-target transition it learned from (stream, rollouts, own data).
-                "target_transitions": stream + ledger.count if uses_samples else 0,
-                "learn_s": learn_s,
-                # e.g. Algorithm 2's stopping rule not met within the budget
-                "warnings": sorted({str(w.message) for w in caught}),
-            }
-        )
-    # Every budget's policy in one lockstep evaluation, from the same start states.
+    eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
+    curve = _evaluated_curve(spec, preset, problem.target, points, policies, eval_seed)
+    for budget in preset.target_budgets[len(curve) :]:
+        curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
+    final_used = getattr(policies[-1], "samples_used", None)
+    return {
+        "experiment": spec.name,
+        "seed": seed,
+        "method": method_name,
+        "curve": curve,
+        "final_return": curve[-1]["mean_return"],
+        "random_return": artifacts.random_return,
+        "data": hooks.data,
+        "mapping_target_samples": artifacts.mapping_target_samples,
+        "algorithm2_samples": None if final_used is None else int(final_used),
+    }
+
+
+def _learn_point(
+    spec: ExperimentSpec,
+    preset: Preset,
+    seed: int,
+    transfer: Any,
+    artifacts: SourceArtifacts,
+    budget: int,
+    problem: "method.TransferProblem",
+    ledger: "Ledger",
+    hooks: "method.Contract",
+) -> tuple[dict, Callable]:
+    """The policy learned from ``budget`` samples and its curve point's learning fields."""
+    ledger.new_budget()
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
+    learn_s = time.perf_counter() - start
+    used = method.samples_used(policy, budget) if hooks.uses_samples else 0
+    stream = used if hooks.data in STREAM_DATA else 0
+    point = {
+        "samples": int(budget),
+        # Algorithm 2 may stop before the budget: ``samples_used`` is what it kept.
+        "samples_used": used,
+        # Every real-target transition it learned from (stream, rollouts, own data).
+        "target_transitions": stream + ledger.count if hooks.uses_samples else 0,
+        "learn_s": learn_s,
+        # e.g. Algorithm 2's stopping rule not met within the budget
+        "warnings": sorted({str(w.message) for w in caught}),
+    }
+    return point, policy
+
+
+def _evaluated_curve(
+    spec: ExperimentSpec,
+    preset: Preset,
+    target: TaskDescription,
+    points: list[dict],
+    policies: list[Callable],
+    eval_seed: int,
+) -> list[dict]:
+    """The curve's points with their evaluations: every budget's policy in one lockstep batch."""
     start = time.perf_counter()
     evaluated = evaluate_curve(spec, preset, policies, eval_seed, bool(target.steadiness))
     evaluate_s = time.perf_counter() - start
@@ -637,19 +673,4 @@ def run_method(
                 "evaluate_s": evaluate_s * int(lengths.sum()) / max(steps, 1),
             }
         )
-    # A method that uses no target samples (an oracle, a reference) learns the same
-    # policy at every budget: it is learned and evaluated once and its point repeated.
-    for budget in preset.target_budgets[len(curve) :]:
-        curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
-    final_used = getattr(policy, "samples_used", None)
-    return {
-        "experiment": spec.name,
-        "seed": seed,
-        "method": method_name,
-        "curve": curve,
-        "final_return": curve[-1]["mean_return"],
-        "random_return": artifacts.random_return,
-        "data": data,
-        "mapping_target_samples": artifacts.mapping_target_samples,
-        "algorithm2_samples": None if final_used is None else int(final_used),
-    }
+    return curve
