@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # The main job at the quick preset: sets up (scripts/setup.sh), runs the five
-# transfer experiments of the paper with the smoke preset and 2 seeds, draws
+# transfer experiments of the paper at the quick preset (one seed), draws
 # the figures and the results table, and renders one clip. Rerunning resumes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 OUT=${OUT:-runs/quick}
-.venv/bin/tatl run tasks/*.toml --preset smoke --seeds 2 --out "$OUT"
+.venv/bin/tatl run tasks/*.toml --preset quick --out "$OUT"
 .venv/bin/tatl plot "$OUT"
-.venv/bin/tatl render tasks/cartpole_to_bicycle.toml --method ta-tl-h --seed 0 --run-dir "$OUT" \
+.venv/bin/tatl render tasks/cartpole_to_bicycle.toml --method ta-tl-h --preset quick --seed 0 --run-dir "$OUT" \
     --seconds 4 --out "$OUT/cartpole_to_bicycle_ta-tl-h.mp4"
 echo "done: $OUT/results.md, $OUT/figures/*.png, $OUT/cartpole_to_bicycle_ta-tl-h.mp4"
