@@ -24,6 +24,11 @@ def test_shipped_spec_loads_with_smoke_and_paper_presets(path):
         preset = spec.preset(name)
         assert list(preset.target_budgets) == sorted(preset.target_budgets)
     assert max(spec.preset("paper").target_budgets) > max(spec.preset("smoke").target_budgets)
+    # quick.sh's preset: the smoke preset's end budgets on one seed, scored the same way.
+    quick, smoke = spec.preset("quick"), spec.preset("smoke")
+    assert quick.target_budgets == (smoke.target_budgets[0], smoke.target_budgets[-1]) and quick.seeds == 1
+    same = ("source_samples", "alignment_samples", "evaluation_episodes", "evaluation_steps", "reference_return")
+    assert all(getattr(quick, f) == getattr(smoke, f) for f in same)
 
 
 def _base() -> dict:
