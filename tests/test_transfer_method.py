@@ -8,9 +8,9 @@ import pytest
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures
-from tatl_mj.transfer.fqi import LinearRegressor
+from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
 from tatl_mj.transfer.method import TransferMethod, TransferProblem
-from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, rl, uma_tl
+from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.registry import METHODS, build
 from tatl_mj.transfer.tatl import TATLPolicy
@@ -164,17 +164,18 @@ def test_uma_tl_starts_from_the_mapped_source_q():
         samples.states, samples.actions, np.zeros(len(samples)), samples.next_states, samples.absorbing, samples.last
     )
     reg = LinearRegressor(LinearFeatures(), ridge=0.0)
-    q = uma_tl(SourceQ(), IdentityMapping(), zero, 3, reg, 0.5, 1)
-    target = 0.5 * MappedQ(SourceQ(), IdentityMapping()).values(zero.next_states).max(axis=1)
+    mapped = MappedQ(SourceQ(), IdentityMapping())
+    q = fitted_q_iteration(zero, 3, reg, 0.5, 1, initial_q=mapped)
+    target = 0.5 * mapped.values(zero.next_states).max(axis=1)
     for a in range(3):
         rows = zero.actions == a
         design = np.hstack([np.ones((rows.sum(), 1)), zero.states[rows]])
         expected = np.linalg.lstsq(design, target[rows], rcond=None)[0]
         np.testing.assert_allclose(q.weights[a], expected, atol=1e-10)
     # From scratch, zero rewards give Q = 0.
-    np.testing.assert_allclose(rl(zero, 3, reg, 0.5, 3).values(zero.states), 0.0, atol=1e-12)
+    np.testing.assert_allclose(fitted_q_iteration(zero, 3, reg, 0.5, 3).values(zero.states), 0.0, atol=1e-12)
     with pytest.raises(ValueError, match="actions"):
-        uma_tl(SourceQ(), IdentityMapping(), zero, 2, reg, 0.5, 1)
+        fitted_q_iteration(zero, 2, reg, 0.5, 1, initial_q=mapped)
 
 
 def test_problem_validation():

@@ -586,9 +586,10 @@ def run_method(
     # A method that uses no target samples (an oracle, a reference) learns the same
     # policy at every budget: it is learned and evaluated once and its point repeated.
     budgets = preset.target_budgets if hooks.uses_samples else preset.target_budgets[:1]
+    learn = partial(learned_policy, spec, preset, seed, transfer, artifacts, problem=problem)
     points, policies = [], []
     for budget in budgets:
-        point, policy = _learn_point(spec, preset, seed, transfer, artifacts, budget, problem, ledger, hooks)
+        point, policy = _learn_point(learn, budget, ledger, hooks)
         points.append(point)
         policies.append(policy)
     eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
@@ -610,22 +611,14 @@ def run_method(
 
 
 def _learn_point(
-    spec: ExperimentSpec,
-    preset: Preset,
-    seed: int,
-    transfer: Any,
-    artifacts: SourceArtifacts,
-    budget: int,
-    problem: "method.TransferProblem",
-    ledger: "Ledger",
-    hooks: "method.Contract",
+    learn: Callable[[int], Callable], budget: int, ledger: "Ledger", hooks: "method.Contract"
 ) -> tuple[dict, Callable]:
-    """The policy learned from ``budget`` samples and its curve point's learning fields."""
+    """The policy ``learn(budget)`` learns and its curve point's learning fields."""
     ledger.new_budget()
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        policy = learned_policy(spec, preset, seed, transfer, artifacts, budget, problem)
+        policy = learn(budget)
     learn_s = time.perf_counter() - start
     used = method.samples_used(policy, budget) if hooks.uses_samples else 0
     stream = used if hooks.data in STREAM_DATA else 0

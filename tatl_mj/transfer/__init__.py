@@ -19,7 +19,7 @@ from tatl_mj.transfer.fqi import (
     q_iteration,
 )
 from tatl_mj.transfer.method import Policy, TransferMethod, TransferProblem
-from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, TargetFQI, rl, uma_tl
+from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, TargetFQI
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.registry import METHODS
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy, TATLStep
@@ -58,6 +58,4 @@ __all__ = [
     "make_features",
     "make_regressor",
     "q_iteration",
-    "rl",
-    "uma_tl",
 ]

@@ -7,8 +7,7 @@
 - **RL**: target FQI from scratch (Q_0 = 0), no transfer.
 
 :class:`TargetFQI` is the one learner (with its data protocols) of the three methods
-:class:`UMATL`, :class:`UMATLPrior` and :class:`RL`; :func:`uma_tl` and :func:`rl` are
-the same two fits as plain functions of the data.
+:class:`UMATL`, :class:`UMATLPrior` and :class:`RL`.
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, Regressor, fitted_q_iteration, make_regressor
+from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, make_regressor
 from tatl_mj.transfer.method import Policy, TransferProblem, check_features
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transitions import Transitions
@@ -44,42 +43,6 @@ class MappedQ:
 
     def greedy(self, states: np.ndarray) -> np.ndarray:
         return np.argmax(self.values(states), axis=1).astype(np.int64)
-
-
-def uma_tl(
-    source_q: QFunction,
-    mapping: Mapping,
-    target_transitions: Transitions,
-    n_actions: int,
-    regressor: Regressor,
-    gamma: float,
-    iterations: int,
-    rng: np.random.Generator | None = None,
-) -> QFunction:
-    """Target FQI initialised with the mapped source Q-function (UMA-TL)."""
-    if source_q.n_actions != n_actions:
-        raise ValueError(f"source_q has {source_q.n_actions} actions, the target has n_actions={n_actions}")
-    return fitted_q_iteration(
-        target_transitions,
-        n_actions,
-        regressor,
-        gamma,
-        iterations,
-        initial_q=MappedQ(source_q, mapping),
-        rng=rng,
-    )
-
-
-def rl(
-    target_transitions: Transitions,
-    n_actions: int,
-    regressor: Regressor,
-    gamma: float,
-    iterations: int,
-    rng: np.random.Generator | None = None,
-) -> QFunction:
-    """Target FQI from scratch (the no-transfer baseline)."""
-    return fitted_q_iteration(target_transitions, n_actions, regressor, gamma, iterations, rng=rng)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -302,6 +265,4 @@ __all__ = [
     "MappedQ",
     "TargetFQI",
     "UMATLPrior",
-    "rl",
-    "uma_tl",
 ]
