@@ -35,7 +35,7 @@ def main(paths: list[str]) -> None:
                 problem = pipeline.transfer_problem(spec, preset, _no_source(spec, preset), seed)
                 policy = learner.learn(problem, problem.reset_samples(SAMPLES))
                 seed_eval = pipeline.derive_seed(seed, spec.stream_name, "evaluation")
-                returns.append(float(np.mean(pipeline.evaluate(spec, preset, policy, seed_eval)[0])))
+                returns.append(float(np.mean(pipeline.target_returns(spec, preset, policy, seed_eval)[0])))
             print(f"{path} [presets.{name}] reference_return = {np.mean(returns):.0f}  # seeds 0-4: {returns}")
 
 
@@ -44,8 +44,8 @@ def _no_source(spec: spec_mod.ExperimentSpec, preset: spec_mod.Preset) -> pipeli
     from tatl_mj.transfer.alignment import IdentityMapping
     from tatl_mj.transfer.fqi import ZeroQ
 
-    n_actions = pipeline.describe(spec.target).n_actions
-    stream = pipeline.collect(spec.target, 10, 0)
+    n_actions = pipeline.description_of(spec.target).n_actions
+    stream = pipeline.random_transitions(spec.target, 10, 0)
     return pipeline.SourceArtifacts(ZeroQ(n_actions), IdentityMapping(), stream, 0.0, 0, 0, 0, {})
 
 

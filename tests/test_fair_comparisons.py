@@ -156,7 +156,7 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
     problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
     # By hand: the projected source policy's episodes from Algorithm 2's own starts.
     starts_seed = pipeline.derive_seed(0, spec.name, "algorithm2-starts")
-    _, lengths = pipeline.evaluate(spec, preset, problem.projected_source_policy(), starts_seed)
+    _, lengths = pipeline.target_returns(spec, preset, problem.projected_source_policy(), starts_seed)
     rollout = int(lengths.sum())
     assert rollout == preset.evaluation_episodes * preset.evaluation_steps  # the pendulum never ends early
     for point in record["curve"]:
@@ -217,7 +217,7 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
         collected.append(data)
         return data
 
-    stream = pipeline.collect(spec.target, 3000, 5)  # the random-policy data of the same size
+    stream = pipeline.random_transitions(spec.target, 3000, 5)  # the random-policy data of the same size
     method = RL(**spec.methods["rl"], data="online", online_batch=200)
     online = method.learn(dataclasses.replace(problem, episode_samples=recording), stream)
     assert [len(c) for c in collected] == [200, 200, 400, 800, 1400]
@@ -227,8 +227,8 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
     shared = RL(**spec.methods["rl"]).learn(problem, stream)
     seed = pipeline.derive_seed(0, spec.name, "evaluation")
     assert (
-        pipeline.evaluate(spec, preset, online, seed)[0].mean()
-        > pipeline.evaluate(spec, preset, shared, seed)[0].mean()
+        pipeline.target_returns(spec, preset, online, seed)[0].mean()
+        > pipeline.target_returns(spec, preset, shared, seed)[0].mean()
     )
 
 

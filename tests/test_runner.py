@@ -198,7 +198,7 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
     for name in spec.methods:
         recorded = json.loads(records.RunDirectory(tmp_path).record_path(spec.name, 0, name).read_text())
         policy = clips.clip_policy(spec, "tiny", 0, name, artifacts)
-        returns, _ = pipeline.evaluate(spec, preset, policy, pipeline.derive_seed(0, spec.name, "evaluation"))
+        returns, _ = pipeline.target_returns(spec, preset, policy, pipeline.derive_seed(0, spec.name, "evaluation"))
         assert list(returns) == recorded["curve"][-1]["returns"], name
         states = artifacts.target_stream.states[:50]
         again = clips.clip_policy(spec, "tiny", 0, name, artifacts)

@@ -72,7 +72,7 @@ class SourceArtifacts:
 # --- data -----------------------------------------------------------------------
 
 
-def collect(side: Side, n: int, seed: int) -> Transitions:
+def random_transitions(side: Side, n: int, seed: int) -> Transitions:
     """``n`` random-policy transitions of one side, as its spec's ``data`` says."""
     if side.data.sampling == "episodes":
         return sampling.collect(
@@ -86,7 +86,7 @@ def collect(side: Side, n: int, seed: int) -> Transitions:
     rng = np.random.default_rng(seed)
     low, high = np.asarray(side.data.state_low), np.asarray(side.data.state_high)
     states = rng.uniform(low, high, size=(n, len(low)))
-    return one_step(side, states, rng.integers(describe(side).n_actions, size=n))
+    return one_step(side, states, rng.integers(description_of(side).n_actions, size=n))
 
 
 def one_step(side: Side, states: np.ndarray, actions: np.ndarray, reward: Callable | None = None) -> Transitions:
@@ -100,7 +100,7 @@ def one_step(side: Side, states: np.ndarray, actions: np.ndarray, reward: Callab
     return Transitions(states, actions, rewards, next_states, absorbing, np.ones(len(states), dtype=bool))
 
 
-def describe(side: Side) -> TaskDescription:
+def description_of(side: Side) -> TaskDescription:
     """The description of one side's task (``suite.describe``)."""
     return suite.describe(side.domain, side.task, side.task_kwargs)
 
@@ -108,13 +108,13 @@ def describe(side: Side) -> TaskDescription:
 def random_policy(side: Side, seed: int) -> Callable[[np.ndarray], np.ndarray]:
     """A uniformly random policy over the task's discrete action set (batched):
     actuator values, or indices for a task that takes indices."""
-    description = describe(side)
+    description = description_of(side)
     actions = np.arange(description.n_actions) if description.discrete else description.action_values
     rng = np.random.default_rng(seed)
     return lambda states: actions[rng.integers(len(actions), size=len(states))]
 
 
-def evaluate(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def target_returns(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-episode returns and lengths of ``policy`` on the target task."""
     return _on_target(spec, preset, [policy], seed)[0]
 
@@ -190,13 +190,13 @@ def steadiness(description: TaskDescription, states: list[np.ndarray], values: l
 
 def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int]:
     learner = spec.source_learning
-    source = describe(spec.source)
+    source = description_of(spec.source)
     if learner.method == "q_iteration":  # exact, on the task's known model (checked at spec load)
         assert source.known_model is not None
         next_state, reward, absorbing, cells = source.known_model()
         return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     n_actions = source.n_actions
-    data = collect(spec.source, preset.source_samples, derive_seed(seed, spec.stream_name, "source-data"))
+    data = random_transitions(spec.source, preset.source_samples, derive_seed(seed, spec.stream_name, "source-data"))
     regressor = fqi.make_regressor(
         {**learner.regressor_spec(), "seed": derive_seed(seed, spec.stream_name, "source-fqi")},
         data.state_dim,
@@ -212,7 +212,7 @@ def _alignment_source(spec: ExperimentSpec, n: int, seed: int) -> Transitions:
         side = dataclasses.replace(
             side, data=dataclasses.replace(side.data, sampling="episodes", state_low=(), state_high=())
         )
-    return collect(side, n, derive_seed(seed, spec.stream_name, "alignment-source"))
+    return random_transitions(side, n, derive_seed(seed, spec.stream_name, "alignment-source"))
 
 
 def _learn_mapping(
@@ -226,8 +226,8 @@ def _learn_mapping(
     built by its kind's entry of ``mappings.MAPPINGS``."""
     inputs = mappings.MappingInputs(
         settings=spec.mapping,
-        source=describe(spec.source),
-        target=describe(spec.target),
+        source=description_of(spec.source),
+        target=description_of(spec.target),
         n=preset.alignment_samples,
         source_samples=partial(_alignment_source, spec, seed=seed),
         target_stream=target_stream,
@@ -245,7 +245,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
 
     start = time.perf_counter()
     stream_size = max(max(preset.target_budgets), preset.alignment_samples)
-    target_stream = collect(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
+    target_stream = random_transitions(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
     timings["target_sampling_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -253,7 +253,7 @@ def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtif
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    returns, _ = evaluate(
+    returns, _ = target_returns(
         spec,
         preset,
         random_policy(spec.target, derive_seed(seed, "random-policy")),
@@ -326,14 +326,14 @@ def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -
         target.task,
         task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.stream_name, "policy-data")},
     )
-    description = describe(target)
+    description = description_of(target)
     actions = np.arange(description.n_actions) if description.discrete else suite.action_set(target.domain)
     index_policy = policy if description.discrete else _as_indices(policy, description.action_values)
     return sampling.policy_transitions(env, index_policy, n, actions, max_episode_steps=target.data.episode_steps)
 
 
 def _nested_samples(
-    collect: Callable[[Callable, int], Transitions], largest: int
+    gather: Callable[[Callable, int], Transitions], largest: int
 ) -> Callable[[Callable, int], Transitions]:
     """``policy_samples`` that collects once per policy and answers each budget with a head.
 
@@ -348,7 +348,7 @@ def _nested_samples(
     def samples(policy: Callable, n: int) -> Transitions:
         entry = cache.get(id(policy))
         if entry is None or entry[0] is not policy or len(entry[1]) < n:
-            entry = cache[id(policy)] = (policy, collect(policy, max(n, largest)))  # holding policy keeps its id
+            entry = cache[id(policy)] = (policy, gather(policy, max(n, largest)))  # holding policy keeps its id
         head = entry[1].head(n)
         last = head.last.copy()
         last[-1] = True
@@ -373,7 +373,7 @@ def _target_reward(target: Side) -> Callable | None:
     The description's ``transition_reward`` where the reward depends on the step
     (the grid world's bumps), else the task's ``batch_reward`` of the next state.
     """
-    description = describe(target)
+    description = description_of(target)
     if description.transition_reward is not None and description.transition_absorbing is not None:
         step_reward, absorbing = description.transition_reward, description.transition_absorbing
     else:
@@ -408,7 +408,7 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Calla
     if reward is None:
         return None
     target = spec.target
-    description = describe(target)
+    description = description_of(target)
     starts = sampling.start_states(
         target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
     )
@@ -461,7 +461,7 @@ def _reset_samples(
     spec: ExperimentSpec, seed: int, largest: int, reward: Callable | None
 ) -> Callable[[int], Transitions]:
     """The reset protocol's data: heads of one stream of one-step transitions from the reset box."""
-    description = describe(spec.target)
+    description = description_of(spec.target)
     cache: list[Transitions] = []
 
     def samples(n: int) -> Transitions:
@@ -512,11 +512,11 @@ def transfer_problem(
     place of the trained one (``tatl_mj.transfer.placebo``), drawn from this seed.
     """
     ledger = Ledger() if ledger is None else ledger
-    source, target = describe(spec.source), describe(spec.target)
+    source, target = description_of(spec.source), description_of(spec.target)
     rollout_seed = _algorithm2_seed(spec, seed)
 
     def target_return(policy: Callable) -> float:
-        return ledger.rollout(policy, lambda p: evaluate(spec, preset, p, rollout_seed))
+        return ledger.rollout(policy, lambda p: target_returns(spec, preset, p, rollout_seed))
 
     reward = _target_reward(spec.target)  # loads the task once: every hook below shares it
     policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))

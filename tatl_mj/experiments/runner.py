@@ -310,7 +310,7 @@ def _check_applies(spec: ExperimentSpec, name: str) -> None:
     if check is None:
         return
     try:
-        check(pipeline.describe(spec.source), pipeline.describe(spec.target))
+        check(pipeline.description_of(spec.source), pipeline.description_of(spec.target))
     except ValueError as error:
         raise MethodError(f"method {name!r} cannot run on {spec.name}: {error}") from None
 
