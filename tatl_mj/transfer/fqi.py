@@ -355,9 +355,8 @@ def _iterate_on_samples(
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
     blocks = [slice(int(bounds[a]), int(bounds[a + 1])) for a in range(n_actions)]
     phi_t = np.ascontiguousarray(phi_states[state_of[order]].T)  # (k, N)
-    # Double precision throughout: next states are off the fitted samples, where a
-    # small-budget fit (fewer samples than features) amplifies any rounding, so
-    # single-precision next-state values turned some greedy policies into others.
+    # Double precision: next states lie off the fitted samples, where a small-budget
+    # fit (fewer samples than features) amplifies any rounding of their values.
     phi_next_t = np.ascontiguousarray(phi_next[next_of[order]].T)  # (k, N)
     rewards = t.rewards[order]
     if prior_taken is not None:
