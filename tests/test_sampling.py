@@ -369,6 +369,24 @@ def test_step_from_is_one_environment_step(domain, task):
         assert_close(g, want)
 
 
+def test_time_varying_queries_are_batched_and_equal_its_environment_steps_exactly():
+    # Every query is an episode's first step, which runs on the reset model, even
+    # after the sampler's own environment has stepped the schedule on.
+    kwargs = {"amplitude": 0.75}
+    sim = simulator.simulator_for("pendulum", "swingup_timevarying", kwargs, 2)
+    assert sim.batched_queries and not sim.fast
+    sampling.collect("pendulum", "swingup_timevarying", 137, seed=3, task_kwargs=kwargs)
+    rng = np.random.default_rng(0)
+    states = np.column_stack([rng.uniform(-np.pi, np.pi, 40), rng.uniform(-12.0, 12.0, 40)])
+    actions = rng.integers(3, size=40)
+    got = sampling.step_from("pendulum", "swingup_timevarying", states, actions, task_kwargs=kwargs)
+    env = suite.load("pendulum", "swingup_timevarying", task_kwargs={**kwargs, "random": 0})
+    for s, a, g in zip(states, actions, got):
+        env.reset()
+        env.physics.set_state_vector(s)
+        np.testing.assert_array_equal(g, env.step(suite.action_set("pendulum")[a]).observation["state"])
+
+
 def test_step_from_divergence_returns_the_start_state():
     states = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 2e10, 0.0, 0.0]])
     got = sampling.step_from("cartpole", "balance", states, np.array([1, 1]))

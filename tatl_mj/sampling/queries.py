@@ -29,7 +29,7 @@ def step_from(
     sim = simulator_for(domain, task, task_kwargs, n_threads)
     s = check_states(states)
     a = check_indices(action_indices, len(s), len(sim.actions))
-    if not sim.fast:
+    if not sim.batched_queries:
         return _step_from_env(sim, s, a)
     return _step_values(sim, s, sim.actions[a])
 

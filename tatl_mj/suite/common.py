@@ -218,6 +218,10 @@ class StateTask(base.Task):
       and the sampler starts many episodes with one call;
     - ``rollout_compatible``: False when the model itself changes during an
       episode (the time-varying pendulum), so the sampler must step the env;
+    - ``first_step_on_reset_model``: with ``rollout_compatible`` False, whether
+      an episode's first step still runs on the model a reset leaves (the
+      time-varying pendulum's schedule starts where reset puts it), so one-step
+      queries, each an episode's first step, run on the batched path;
     - ``control_noise``: whether ``controls`` draws from ``random`` (the bicycle's
       rider). Without noise the sampler maps only the actions a call takes, with
       ``random=None``; by default a task that overrides ``controls`` is taken to
@@ -225,6 +229,7 @@ class StateTask(base.Task):
     """
 
     rollout_compatible: bool = True
+    first_step_on_reset_model: bool = False
 
     @property
     def control_noise(self) -> bool:
