@@ -1,6 +1,7 @@
 """Experiment specs: the five shipped specs load; malformed ones name file, key and expectation."""
 
 import copy
+import dataclasses
 import tomllib
 from pathlib import Path
 
@@ -64,6 +65,7 @@ def test_wrong_type_is_named():
         (lambda t: t["source_learning"].__setitem__("gamma", 1.5), "source_learning.gamma"),
         (lambda t: t["presets"]["smoke"].__setitem__("target_budgets", [400, 100]), "strictly increasing"),
         (lambda t: t["presets"]["smoke"].__setitem__("evaluation_episodes", 0), "evaluation_episodes"),
+        (lambda t: t["presets"]["smoke"].__setitem__("model_samples", 0), "presets.smoke.model_samples"),
         (lambda t: t["presets"]["smoke"].pop("source_samples"), "missing required key"),
         (lambda t: t.pop("presets"), "presets"),
         (lambda t: t["source"]["data"].__setitem__("state_high", [-5.0, -9.0]), "low < high"),
@@ -73,6 +75,21 @@ def test_impossible_values_are_named(edit, needle):
     table = copy.deepcopy(_base())
     edit(table)
     assert needle in _error(table)
+
+
+def test_a_presets_model_samples_reach_the_model_based_learner_unless_its_table_sets_them():
+    spec = spec_mod.load_spec(TASKS[0].parent / "ip_to_flipped_ip.toml")
+    quick, smoke = spec.preset("quick"), spec.preset("smoke")
+    assert quick.model_samples == 5000 and smoke.model_samples is None
+    default = spec_mod.methods_from_spec(spec, smoke, ["apprentice-fqi"])["apprentice-fqi"]
+    assert default.model_samples == 20000
+    assert spec_mod.methods_from_spec(spec, quick, ["apprentice-fqi"])["apprentice-fqi"].model_samples == 5000
+    # A method without the setting is untouched; a table's own value wins over the preset's.
+    assert not hasattr(spec_mod.methods_from_spec(spec, quick, ["ta-tl"])["ta-tl"], "model_samples")
+    own = dataclasses.replace(
+        spec, methods={**spec.methods, "apprentice-fqi": {**spec.methods["apprentice-fqi"], "model_samples": 700}}
+    )
+    assert spec_mod.methods_from_spec(own, quick, ["apprentice-fqi"])["apprentice-fqi"].model_samples == 700
 
 
 def test_unknown_preset_lists_valid_ones(tmp_path):

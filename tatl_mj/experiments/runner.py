@@ -1,23 +1,24 @@
 """The batch runner: work units over a local process pool or a Ray cluster, resumable.
 
-Work units come in two phases. Phase one, per (experiment, seed): learn the
+Two kinds of work unit. A source unit, per (experiment, seed): learn the
 source policy and the mapping and draw the target data (cached on disk and
-reused by every method). Phase two, per (experiment, seed, method): one
-method's learning curve. Workers return their results; only this process
-writes, each record atomically, so a crash or a kill loses no finished unit
-and a rerun of the same command resumes where it stopped. A failing unit is
-reported (traceback in DIR/failures/) and does not take the others down; once
-every other unit has finished and the summary is written, :func:`run` raises
+reused by every method). A method unit, per (experiment, seed, method): one
+method's learning curve, which starts as soon as its source unit is done, in
+the same pool. Workers return their results; only this process writes, each
+record atomically, so a crash or a kill loses no finished unit and a rerun of
+the same command resumes where it stopped. A failing unit is reported
+(traceback in DIR/failures/) and does not take the others down; once every
+other unit has finished and the summary is written, :func:`run` raises
 :class:`RunFailed`, so a run with a failed unit never looks like a success.
 
-A unit computes with the BLAS threads its process has: a local worker uses
-OpenBLAS's default, a Ray task of one CPU one thread, and a decision at a
-threshold (Algorithm 2's stopping rule) can flip on the last bit of a sum, so
-records of the two executors can differ (docs/protocol.md, "Across machines").
+Every unit computes on one BLAS/OpenMP thread (:func:`pipeline.one_thread`), as
+a one-CPU Ray task does, so its record depends neither on the executor nor on
+the machine's core count.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import os
 import pickle
@@ -28,7 +29,7 @@ import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable
 
 from tqdm import tqdm
 
@@ -140,15 +141,23 @@ def _work(
 Job = tuple[Unit, tuple]
 
 
-def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
+Then = Callable[[Unit, dict], list[Job]]
+"""What a dispatcher calls with each finished unit's result: it records the result
+and returns the jobs that unit has unlocked (a source's methods), to run next."""
+
+
+def _local(jobs: list[Job], workers: int, then: Then) -> None:
     if workers <= 1:
-        for unit, args in jobs:
-            yield unit, work(*args)
+        queue = collections.deque(jobs)
+        while queue:
+            unit, args = queue.popleft()
+            queue.extend(then(unit, work(*args)))
         return
     import multiprocessing
 
     # spawn: MuJoCo/GL state must not be forked into workers.
     # [robustness] workers die with this process, however it dies.
+    # One pool for sources and methods: a method starts as soon as its source is done.
     with ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
@@ -156,15 +165,16 @@ def _local(jobs: list[Job], workers: int) -> Iterator[tuple[Unit, dict]]:
         initargs=(os.getpid(),),
     ) as pool:
         futures = {pool.submit(work, *args): unit for unit, args in jobs}
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+        while futures:
+            done, _ = wait(futures, return_when=FIRST_COMPLETED)
             for future in done:
+                unit = futures.pop(future)
                 try:
                     result = future.result()
                 except Exception:  # noqa: BLE001 - e.g. a worker killed by the OS
                     result = {"error": traceback.format_exc()}
-                yield futures[future], result
+                for next_unit, args in then(unit, result):
+                    futures[pool.submit(work, *args)] = next_unit
 
 
 CONNECT_TIMEOUT_S = 10.0
@@ -196,7 +206,7 @@ def check_address(address: str) -> None:
         ) from None
 
 
-def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Unit, dict]]:
+def _ray(jobs: list[Job], workers: int, address: str | None, then: Then) -> None:
     try:
         import ray
     except ImportError:
@@ -225,15 +235,16 @@ def _ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[U
     try:
         remote = ray.remote(num_cpus=1)(work)
         refs = {remote.remote(*args): unit for unit, args in jobs}
-        pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
+        while refs:
+            done, _ = ray.wait(list(refs), num_returns=1)
             for ref in done:
+                unit = refs.pop(ref)
                 try:
                     result = ray.get(ref)
                 except Exception:  # noqa: BLE001 - a lost node or worker
                     result = {"error": traceback.format_exc()}
-                yield refs[ref], result
+                for next_unit, args in then(unit, result):
+                    refs[remote.remote(*args)] = next_unit
     finally:
         if started:
             ray.shutdown()
@@ -315,12 +326,14 @@ def _check_applies(spec: ExperimentSpec, name: str) -> None:
         raise MethodError(f"method {name!r} cannot run on {spec.name}: {error}") from None
 
 
-def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job]], Iterator[tuple[Unit, dict]]]:
+def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job], Then], None]:
     if executor not in EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
     if executor == "ray" and address:
         check_address(address)  # before the run touches its folder
-    return (lambda jobs: _ray(jobs, workers, address)) if executor == "ray" else (lambda jobs: _local(jobs, workers))
+    if executor == "ray":
+        return lambda jobs, then: _ray(jobs, workers, address, then)
+    return lambda jobs, then: _local(jobs, workers, then)
 
 
 class _Recorder:
@@ -399,7 +412,7 @@ def _run_locked(
     all_units: list[Unit],
     custom: dict[str, Any],
     progress: bool,
-    dispatch: Callable[[list[Job]], Iterator[tuple[Unit, dict]]],
+    dispatch: Callable[[list[Job], Then], None],
 ) -> dict:
     _check_manifest(run_dir, preset, specs)
     start = time.perf_counter()
@@ -408,21 +421,31 @@ def _run_locked(
     bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
     record = _Recorder(run_dir, done, bar)
 
-    sources = [u for u in all_units if u.name == SOURCE_UNIT and u not in done]
-    for unit, result in dispatch([(u, (by_name[u.experiment], preset, u, None)) for u in sources]):
-        record(unit, result)
-
-    jobs = []
+    # Each experiment and seed's method units wait for its source unit, and start when it is done.
+    waiting: dict[tuple[str, int], list[Unit]] = {}
     for unit in all_units:
-        if unit.name == SOURCE_UNIT or unit in done:
-            continue
-        if Unit(unit.experiment, unit.seed, SOURCE_UNIT) not in done:
-            record.skip(unit, "its source unit failed")
-            continue
-        blob = run_dir.read_blob(unit.experiment, unit.seed)
-        jobs.append((unit, (by_name[unit.experiment], preset, unit, blob, custom.get(unit.name))))
-    for unit, result in dispatch(jobs):
+        if unit.name != SOURCE_UNIT and unit not in done:
+            waiting.setdefault((unit.experiment, unit.seed), []).append(unit)
+
+    def methods_of(source: Unit) -> list[Job]:
+        units = waiting.pop((source.experiment, source.seed), [])
+        if source not in done:
+            for unit in units:
+                record.skip(unit, "its source unit failed")
+            return []
+        blob = run_dir.read_blob(source.experiment, source.seed) if units else None
+        return [(u, (by_name[u.experiment], preset, u, blob, custom.get(u.name))) for u in units]
+
+    def then(unit: Unit, result: dict) -> list[Job]:
         record(unit, result)
+        return methods_of(unit) if unit.name == SOURCE_UNIT else []
+
+    sources = [u for u in all_units if u.name == SOURCE_UNIT]
+    jobs = [(u, (by_name[u.experiment], preset, u, None)) for u in sources if u not in done]
+    for source in sources:
+        if source in done:
+            jobs += methods_of(source)
+    dispatch(jobs, then)
     bar.close()
 
     method_names = list(dict.fromkeys(u.name for u in all_units if u.name != SOURCE_UNIT))

@@ -126,6 +126,10 @@ class Preset:
     # ``first_seed``. The paper preset's are held out (tuning used seeds 0-4).
     seeds: int = 2
     first_seed: int = 0
+    # How many apprentice-predicted transitions a model-based learner (apprentice-fqi)
+    # solves, where its method table leaves ``model_samples`` unset (None: the method's
+    # own default). A compute budget, not target data: no real-target step is taken.
+    model_samples: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -431,6 +435,12 @@ def _check(spec: ExperimentSpec) -> None:
                 _fail(p, f"{key}.{field}", "a positive integer", getattr(preset, field))
         if preset.first_seed < 0:
             _fail(p, f"{key}.first_seed", "an integer >= 0", preset.first_seed)
+        if preset.model_samples is not None and (
+            not isinstance(preset.model_samples, int)
+            or isinstance(preset.model_samples, bool)
+            or preset.model_samples <= 0
+        ):
+            _fail(p, f"{key}.model_samples", "a positive integer", preset.model_samples)
         budgets = preset.target_budgets
         if not budgets or any(b <= 0 for b in budgets) or list(budgets) != sorted(set(budgets)):
             _fail(p, f"{key}.target_budgets", "a non-empty strictly increasing array of positive integers", budgets)
@@ -440,7 +450,8 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     """Every method of the spec (or the ``names`` among them), built with its settings.
 
     Algorithm 2's increment (``batch``), where a method has one and the spec leaves
-    it unset, is the preset's smallest target budget.
+    it unset, is the preset's smallest target budget; a model-based learner's
+    ``model_samples``, likewise, is the preset's where it sets one.
     """
     from tatl_mj.transfer import registry
 
@@ -449,8 +460,11 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     for name in chosen:
         settings = dict(spec.methods.get(name, {}))
         if plugin_path(settings) is None:
-            if "batch" in registry.settings_of(registry.base_of(name, settings)) and settings.get("batch") is None:
+            known = registry.settings_of(registry.base_of(name, settings))
+            if "batch" in known and settings.get("batch") is None:
                 settings["batch"] = min(preset.target_budgets)
+            if "model_samples" in known and "model_samples" not in settings and preset.model_samples is not None:
+                settings["model_samples"] = preset.model_samples
         out[name] = build_method(name, settings)
     return out
 
