@@ -103,3 +103,20 @@ def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, d
         (line,) = [ln for ln in left.get_lines() if len(ln.get_xdata()) == 2 and ln.get_linestyle() == "-"]
         assert list(line.get_ydata()) == [0.3, 0.8]
     assert (tmp_path / "c.png").exists()
+
+
+def test_credit_map_clips_a_baselines_blow_up_and_marks_it(tmp_path, drawn):
+    def final(v):
+        return {"final_iqm": {"value": v, "low": v - 0.05, "high": v + 0.05}}
+
+    cells = [
+        ({"g": g}, {"ablations": [], "methods": {"m": final(0.8), "base": final(b)}})
+        for g, b in ((1, 0.9), (2, 0.7), (3, -15.0))
+    ]
+    plot.credit_map("toy", cells, tmp_path / "c.png")
+    (fig,) = drawn
+    right = fig.axes[1]
+    low, high = right.get_ylim()
+    assert -2.0 < low < 0.0 and high > 0.9  # the others keep their scale; -15 lies outside
+    marked = [c for c in right.collections if c.get_offsets().shape[0] == 1]
+    assert any(float(c.get_offsets()[0][1]) == low for c in marked)  # a triangle on the lower edge

@@ -962,16 +962,23 @@ def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> P
             color = colors.get(key[1], "black")
             ax_p.errorbar(x + 0.06 * (i - len(pairs) / 2), v, yerr=[v - lo, hi - v], marker="o", capsize=3,
                           ls=LINE_STYLES[i % len(LINE_STYLES)], color=color, label=f"{key[1]} > {key[2]}")  # fmt: skip
+        finals = {method: np.array([final(exp, method) for _, exp in cells]).T for method in methods}
+        # A baseline's blow-up (scores are unbounded below) must not flatten the others: it is clipped, marked.
+        limits = axis_limits([v for f in finals.values() for v in f[0]], keep=(0.0, REFERENCE_THRESHOLD))
         for i, method in enumerate(methods):
-            v, lo, hi = np.array([final(exp, method) for _, exp in cells]).T
-            ax_s.plot(x, v, marker="o", color=colors[method], ls=LINE_STYLES[i % len(LINE_STYLES)], label=method)
-            ax_s.fill_between(x, lo, hi, color=colors[method], alpha=0.15, lw=0)
+            v, lo, hi = finals[method]
+            ax_s.plot(x, np.clip(v, *limits), marker="o", color=colors[method], ls=LINE_STYLES[i % len(LINE_STYLES)],
+                      label=method)  # fmt: skip
+            ax_s.fill_between(x, np.clip(lo, *limits), np.clip(hi, *limits), color=colors[method], alpha=0.15, lw=0)
+            _mark_clipped(ax_s, x, v, limits, colors[method])
+        ax_s.set_ylim(*limits)
         labels = [str(c[params[0]]) for c, _ in cells]
         for ax in (ax_p, ax_s):
             ax.set_xticks(x, labels)
             ax.set_xlabel(params[0])
             ax.grid(alpha=0.25)
-            ax.legend(fontsize=7, frameon=False)
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=7, frameon=False)
         ax_p.axhline(0.5, color="black", ls="--", lw=0.9)
         ax_p.set_ylim(-0.02, 1.02)
         ax_s.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
