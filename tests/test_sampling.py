@@ -440,6 +440,26 @@ def test_evaluate_matches_environment_returns(domain, task):
         assert (total, steps) == (returns[i], lengths[i])
 
 
+def test_time_varying_policies_run_in_lockstep_on_the_environments_own_steps():
+    # One model a step, edited as the schedule says, serves every live episode (they all
+    # start together); each policy's episodes are its environments' own, exactly.
+    kwargs = {"amplitude": 0.75}
+    assert simulator.simulator_for("pendulum", "swingup_timevarying", kwargs, 2).step_env is not None
+    gains = [np.array([[-2.0, -1.0]]), np.array([[-8.0, -2.0]])]
+    policies = [lambda s, g=g: np.clip(s @ g.T, -4.0, 4.0) for g in gains]
+    got = sampling.evaluate_policies("pendulum", "swingup_timevarying", policies, 3, 5, kwargs)
+    for policy, (returns, lengths) in zip(policies, got):
+        for i in range(3):
+            env = suite.load(
+                "pendulum", "swingup_timevarying", task_kwargs={**kwargs, "random": np.random.RandomState([5, i])}
+            )
+            timestep, total, steps = env.reset(), 0.0, 0
+            while not timestep.last():
+                timestep = env.step(policy(timestep.observation["state"][None])[0])
+                total, steps = total + timestep.reward, steps + 1
+            assert (total, steps) == (returns[i], lengths[i]) and steps > 100
+
+
 def steer_into_lean(gain):
     """A bicycle policy (torque from roll and roll rate): low gains fall, at varied times."""
     return lambda s: np.clip(gain * (s[:, 2:3] + 0.25 * s[:, 3:4]), -2.0, 2.0)

@@ -74,13 +74,16 @@ def evaluate_policies(
     if not policies:
         raise ValueError("evaluate_policies needs at least one policy")
     sim = episode_simulator(domain, task, task_kwargs, n_threads, max_episode_steps)
+    if joint is None:
+        joint = one_by_one(policies)
+    if not sim.fast and sim.step_env is not None:
+        returns, lengths = _evaluate_scheduled(sim, joint, len(policies), n_episodes, seed, max_episode_steps)
+        return [(returns[b], lengths[b]) for b in range(len(policies))]
     if not sim.fast:
         return [_evaluate_loop(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
     limit = sim.step_limit(max_episode_steps)
     if not np.isfinite(limit):
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
-    if joint is None:
-        joint = one_by_one(policies)
     returns, lengths = _evaluate_batch(sim, joint, len(policies), n_episodes, seed, limit)
     return [(returns[b], lengths[b]) for b in range(len(policies))]
 
@@ -131,6 +134,45 @@ def _evaluate_batch(
             lengths[live] += 1
             ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
             live, states = live[~ended], next_states[~ended]
+    return returns.reshape(n_policies, n_episodes), lengths.reshape(n_policies, n_episodes)
+
+
+def _evaluate_scheduled(
+    sim: Simulator, joint: Joint, n_policies: int, n_episodes: int, seed: int, max_episode_steps: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(K, n) returns and lengths of :func:`_evaluate_loop`'s episodes, batched: a task whose
+    model depends on the step alone (``model_for_step``), its episodes all at the same step.
+
+    The starts are the environments' seeded ``(seed, i)``; each control step runs every live
+    episode on the one model of that step, so the steps are the environments' own.
+    """
+    envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
+    for env in envs:
+        env.reset()
+    qpos = np.stack([np.array(env.physics.data.qpos) for env in envs])
+    qvel = np.stack([np.array(env.physics.data.qvel) for env in envs])
+    task_obj, step_physics = sim.env.task, sim.step_env.physics  # type: ignore[union-attr]
+    limit = min(sim.step_limit(None), np.inf if max_episode_steps is None else max_episode_steps)
+    total = n_policies * n_episodes
+    batch = sim.new_batch(total)
+    live = np.arange(total)
+    qpos, qvel = np.tile(qpos, (n_policies, 1)), np.tile(qvel, (n_policies, 1))
+    sim.place(batch, live, qpos, qvel)
+    states = sim.physics.states_from(qpos, qvel)
+    returns = np.zeros(total)
+    lengths = np.zeros(total, np.int64)
+    step = 0
+    while len(live):
+        values = _joint_values(joint, sim, live, states, n_episodes)
+        task_obj.model_for_step(step_physics, step)
+        batch.set_models(step_physics.model.ptr)  # read again after every edit
+        next_states, diverged = sim.advance(batch, live, task_obj.controls(values, None), lengths[live] == 0)
+        rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
+        returns[live] += rewards
+        lengths[live] += 1
+        step += 1
+        ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
+        live, states = live[~ended], next_states[~ended]
     return returns.reshape(n_policies, n_episodes), lengths.reshape(n_policies, n_episodes)
 
 

@@ -89,6 +89,9 @@ class Simulator:
         # MuJoCo substeps per control step (0 without physics: nothing to count).
         self.substeps = 0 if physics is None else int(round(self.env.control_timestep() / physics.timestep()))
         self.table: Table | None = None
+        # Where the model depends on the step alone, lockstep episodes that start together
+        # share one model a step, edited in this environment's physics (evaluation).
+        self.step_env: dm_env.Environment | None = None
         if not self.batched_queries:
             known_model = suite.describe(domain, task, self.kwargs).known_model
             if known_model is not None and np.array_equal(self.actions, np.arange(len(self.actions))):
@@ -100,6 +103,8 @@ class Simulator:
             query_env = self.make_env(0)
             query_env.reset()
             physics = query_env.physics
+            if hasattr(self.env.task, "model_for_step"):
+                self.step_env = self.make_env(0)
         self.physics = physics
         self.model = physics.model.ptr
         self.n_sub = int(round(self.env.control_timestep() / physics.timestep()))

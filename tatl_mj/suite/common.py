@@ -222,6 +222,12 @@ class StateTask(base.Task):
       an episode's first step still runs on the model a reset leaves (the
       time-varying pendulum's schedule starts where reset puts it), so one-step
       queries, each an episode's first step, run on the batched path;
+    - ``model_for_step(physics, step)``: with ``rollout_compatible`` False, an
+      optional method that edits ``physics``'s model into the one an episode's
+      control step ``step`` (0, 1, ...) runs on, when that model depends on the
+      step alone (the time-varying pendulum's schedule); ``before_step`` calls
+      it. Evaluation episodes, which all start together, then run in lockstep
+      on one model edited per step;
     - ``control_noise``: whether ``controls`` draws from ``random`` (the bicycle's
       rider). Without noise the sampler maps only the actions a call takes, with
       ``random=None``; by default a task that overrides ``controls`` is taken to

@@ -215,10 +215,14 @@ class Task(common.StateTask):
         super().initialize_episode(physics)
 
     def before_step(self, action: Any, physics: Physics) -> None:
-        if self.timevarying:
-            physics.set_pendulum(*timevarying_schedule(self.step_index, self.params, self.amplitude))
+        self.model_for_step(physics, self.step_index)
         self.step_index += 1
         super().before_step(action, physics)
+
+    def model_for_step(self, physics: Physics, step: int) -> None:
+        """Gives ``physics`` the pendulum of control step ``step`` (the schedule's; a fixed one is left)."""
+        if self.timevarying:
+            physics.set_pendulum(*timevarying_schedule(step, self.params, self.amplitude))
 
     def batch_reward(self, states: np.ndarray) -> np.ndarray:
         s = np.asarray(states, np.float64)
