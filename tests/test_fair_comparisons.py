@@ -273,3 +273,22 @@ def test_new_methods_are_registered_and_source_free_where_they_say():
     assert "apprentice-fqi" in registry.SOURCE_FREE and "uma-tl-prior" not in registry.SOURCE_FREE
     with pytest.raises(ValueError, match=r"RL.data is 'replay'; valid choices: \['shared', 'reset', 'online'\]"):
         RL(data="replay")
+
+
+def test_epsilon_greedy_on_cells_takes_the_same_actions_and_draws_with_its_cache():
+    from tatl_mj.transfer.methods.target_fqi import _epsilon_greedy
+
+    class Counted:  # a tabular Q over 4 cells x 3 actions, counting its evaluations
+        n_actions, calls = 3, 0
+
+        def greedy(self, states):
+            Counted.calls += 1
+            return (np.asarray(states)[:, 0].astype(int) * 7 + 1) % 3
+
+    cells = np.random.default_rng(3).integers(4, size=(400, 1)).astype(float)
+    plain = _epsilon_greedy(Counted(), 0.3, np.random.default_rng(0))
+    taken = [int(plain(c[None])[0]) for c in cells]
+    Counted.calls = 0
+    cached = _epsilon_greedy(Counted(), 0.3, np.random.default_rng(0), cells=True)
+    assert [int(cached(c[None])[0]) for c in cells] == taken
+    assert Counted.calls == 4  # once a cell

@@ -206,7 +206,7 @@ class TargetFQI:
                 problem.charge(collected)  # type: ignore[misc]
             else:
                 with warnings.catch_warnings(record=True) as caught:
-                    policy = None if q is None else _epsilon_greedy(q, self.epsilon, rng)
+                    policy = None if q is None else _epsilon_greedy(q, self.epsilon, rng, problem.target.discrete)
                     more = problem.episode_samples(policy, size, round_)
                     data = more if data is None else Transitions.concatenate([data, more])
                     q = self.fit(problem, data, rng)
@@ -219,11 +219,26 @@ class TargetFQI:
             round_ += 1
 
 
-def _epsilon_greedy(q: QFunction, epsilon: float, rng: np.random.Generator) -> Callable[[np.ndarray], np.ndarray]:
-    """Index policy: greedy in ``q``, a uniformly random action with probability ``epsilon``."""
+def _epsilon_greedy(
+    q: QFunction, epsilon: float, rng: np.random.Generator, cells: bool = False
+) -> Callable[[np.ndarray], np.ndarray]:
+    """Index policy: greedy in ``q``, a uniformly random action with probability ``epsilon``.
+
+    With ``cells`` (a discrete target, stepped one state a call) each cell's greedy
+    action is computed once: the same action, without a Q evaluation a step.
+    """
+    known: dict[bytes, np.ndarray] = {}
+
+    def greedy_of(states: np.ndarray) -> np.ndarray:
+        if not cells or len(states) != 1:
+            return q.greedy(states)
+        key = np.asarray(states, np.float64).tobytes()
+        if key not in known:
+            known[key] = q.greedy(states)
+        return known[key]
 
     def policy(states: np.ndarray) -> np.ndarray:
-        greedy = q.greedy(states)
+        greedy = greedy_of(states)
         explore = rng.random(len(greedy)) < epsilon
         return np.where(explore, rng.integers(q.n_actions, size=len(greedy)), greedy)
 
