@@ -804,6 +804,19 @@ def test_the_grid_loops_on_its_known_table_equal_stepping_its_environment(max_ep
             np.testing.assert_array_equal(got, want)
 
 
+def test_a_grid_policy_collected_on_its_table_equals_policy_transitions_in_its_environment():
+    # The pipeline's policy stream on the grid uses collect() (the table); it must equal
+    # the environment loop policy_transitions runs, from the same seeded environment.
+    def policy(states):
+        return np.where(states[:, 1] < 8, 3, 0)
+
+    got = sampling.collect(*GRID, 1500, seed=11, policy=policy, task_kwargs=RANDOM_START, max_episode_steps=40)
+    env = suite.load(*GRID, task_kwargs={**RANDOM_START, "random": 11})
+    want = sampling.policy_transitions(env, policy, 1500, np.arange(4), max_episode_steps=40)
+    for field in FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+
+
 def test_the_grid_table_refuses_what_its_environment_refuses():
     with pytest.raises(ValueError, match="gridworld action must be one of"):
         sampling.evaluate("gridworld", "windy", lambda s: np.full(len(s), 1.5), 3, seed=0, max_episode_steps=5)

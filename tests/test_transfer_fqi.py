@@ -269,3 +269,14 @@ def test_one_hot_q_values_are_the_indicator_product_exactly():
     np.testing.assert_array_equal(q.greedy(cells), np.argmax(basis(cells) @ weights.T, axis=1))
     with pytest.raises(ValueError, match="3 x 4 grid"):
         q.values(np.array([[3.0, 0.0]]))
+
+
+def test_tabular_q_indexes_one_cell_as_it_indexes_many_and_refuses_non_cells():
+    cells = np.array([[r, c] for r in range(3) for c in range(4) if (r, c) != (1, 2)])  # a wall at (1, 2)
+    q = TabularQ(np.arange(len(cells) * 2.0).reshape(-1, 2), cells=cells)
+    many = q.index(cells.astype(float))
+    assert [int(q.index(cell[None].astype(float))[0]) for cell in cells] == many.tolist() == list(range(len(cells)))
+    assert q.index(np.array([[2.0 + 1e-12, 3.0]])).tolist() == [len(cells) - 1]
+    for bad in ([[1.0, 2.0]], [[0.5, 0.0]], [[3.0, 0.0]], [[-1.0, 0.0]]):
+        with pytest.raises(ValueError, match="cells of the grid"):
+            q.index(np.array(bad))

@@ -321,12 +321,20 @@ def _target_step(target: Side, description: TaskDescription, states: np.ndarray,
 def _policy_samples(spec: ExperimentSpec, seed: int, policy: Callable, n: int) -> Transitions:
     """n target transitions of ``policy`` from the target's own (random) starts, seeded per seed."""
     target = spec.target
-    env = suite.load(
-        target.domain,
-        target.task,
-        task_kwargs={**target.task_kwargs, "random": derive_seed(seed, spec.stream_name, "policy-data")},
-    )
+    random = derive_seed(seed, spec.stream_name, "policy-data")
     description = description_of(target)
+    if description.discrete and description.known_model is not None:
+        # The same transitions, from the environment's resets and the known table's steps.
+        return sampling.collect(
+            target.domain,
+            target.task,
+            n,
+            random,
+            policy=policy,
+            task_kwargs=target.task_kwargs,
+            max_episode_steps=target.data.episode_steps,
+        )
+    env = suite.load(target.domain, target.task, task_kwargs={**target.task_kwargs, "random": random})
     actions = np.arange(description.n_actions) if description.discrete else suite.action_set(target.domain)
     index_policy = policy if description.discrete else _as_indices(policy, description.action_values)
     return sampling.policy_transitions(env, index_policy, n, actions, max_episode_steps=target.data.episode_steps)

@@ -502,6 +502,14 @@ class TabularQ:
             return idx
         if self.cells is None:
             raise ValueError("TabularQ got [row, col] states but was built without cells; pass indices")
+        if s.shape == (1, 2):  # a policy stepped one cell a call: the same index, without array checks
+            row, col = float(s[0, 0]), float(s[0, 1])
+            r, c = round(row), round(col)  # half to even, as np.rint
+            shape = self._lookup.shape
+            if abs(row - r) <= 1e-9 and abs(col - c) <= 1e-9 and 0 <= r < shape[0] and 0 <= c < shape[1]:
+                found = int(self._lookup[r, c])
+                if found >= 0:
+                    return np.array([found], dtype=np.int64)
         rc = as_states(s, dim=2)
         cells = np.rint(rc).astype(np.int64)
         lookup = self._lookup
