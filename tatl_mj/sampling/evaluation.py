@@ -68,7 +68,9 @@ def evaluate_policies(
     only the per-step work of stepping them is shared (a learning curve's budgets
     are evaluated together). ``joint`` answers all policies' calls of a step at
     once (default: each policy in turn). Tasks stepped through their environment
-    or their known table evaluate the policies one after another.
+    or their known table evaluate the policies one after another, but for one
+    whose model depends on the step alone (``model_for_step``), whose episodes
+    run in lockstep on that step's model.
     """
     n_episodes = integer("", "n_episodes", n_episodes, 1)
     if not policies:
@@ -76,7 +78,7 @@ def evaluate_policies(
     sim = episode_simulator(domain, task, task_kwargs, n_threads, max_episode_steps)
     if joint is None:
         joint = one_by_one(policies)
-    if not sim.fast and sim.step_env is not None:
+    if not sim.fast and sim.step_env is not None and not sim.env.task.control_noise:
         returns, lengths = _evaluate_scheduled(sim, joint, len(policies), n_episodes, seed, max_episode_steps)
         return [(returns[b], lengths[b]) for b in range(len(policies))]
     if not sim.fast:
@@ -101,7 +103,6 @@ def _evaluate_batch(
     sim: Simulator, joint: Joint, n_policies: int, n_episodes: int, seed: int, limit: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """(K, n) returns and lengths: simulation b * n + i is policy b's episode i."""
-    total = n_policies * n_episodes
     with sim.seeded_env(seed) as env:
         task_obj = env.task
         # Every policy's episode i starts where and draws what evaluate's episode i does.
@@ -110,31 +111,16 @@ def _evaluate_batch(
             randoms = [r for _ in range(n_policies) for r in evaluation_randoms(seed, n_episodes)]
         # Optional in the domain contract: each row's controls from its own stream at once.
         controls_each = getattr(task_obj, "controls_each", None)
-        batch = sim.new_batch(total)
-        live = np.arange(total)
-        qpos, qvel = task_obj.start_configurations(env.physics, n_episodes)
-        qpos, qvel = np.tile(qpos, (n_policies, 1)), np.tile(qvel, (n_policies, 1))
-        sim.place(batch, live, qpos, qvel)
-        states = sim.physics.states_from(qpos, qvel)
-        returns = np.zeros(total)
-        lengths = np.zeros(total, np.int64)
-        while len(live):
-            values = _joint_values(joint, sim, live, states, n_episodes)
+
+        def controls(values: np.ndarray, live: np.ndarray) -> np.ndarray:
             if randoms is None:
-                controls = task_obj.controls(values, None)
-            elif controls_each is not None:  # the same draws in one call
-                controls = controls_each(values, [randoms[i] for i in live])
-            else:
-                controls = np.concatenate(
-                    [task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)]
-                )
-            next_states, diverged = sim.advance(batch, live, controls, lengths[live] == 0)
-            rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
-            returns[live] += rewards
-            lengths[live] += 1
-            ended = diverged | task_obj.batch_absorbing(next_states) | (lengths[live] >= limit)
-            live, states = live[~ended], next_states[~ended]
-    return returns.reshape(n_policies, n_episodes), lengths.reshape(n_policies, n_episodes)
+                return task_obj.controls(values, None)
+            if controls_each is not None:  # the same draws in one call
+                return controls_each(values, [randoms[i] for i in live])
+            return np.concatenate([task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)])
+
+        starts = task_obj.start_configurations(env.physics, n_episodes)
+        return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit)
 
 
 def _evaluate_scheduled(
@@ -149,14 +135,38 @@ def _evaluate_scheduled(
     envs = [sim.make_env(np.random.RandomState([seed, i])) for i in range(n_episodes)]
     for env in envs:
         env.reset()
-    qpos = np.stack([np.array(env.physics.data.qpos) for env in envs])
-    qvel = np.stack([np.array(env.physics.data.qvel) for env in envs])
+    starts = tuple(np.stack([np.array(getattr(env.physics.data, f)) for env in envs]) for f in ("qpos", "qvel"))
     task_obj, step_physics = sim.env.task, sim.step_env.physics  # type: ignore[union-attr]
+
+    def model_for(step: int) -> None:
+        task_obj.model_for_step(step_physics, step)
+        batch_models.set_models(step_physics.model.ptr)  # read again after every edit
+
     limit = min(sim.step_limit(None), np.inf if max_episode_steps is None else max_episode_steps)
+    batch_models = sim.new_batch(n_policies * n_episodes)
+    controls = lambda values, live: task_obj.controls(values, None)  # noqa: E731
+    return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit, batch_models, model_for)
+
+
+def _lockstep(
+    sim: Simulator,
+    task_obj: Any,
+    joint: Joint,
+    n_policies: int,
+    starts: tuple[np.ndarray, np.ndarray],
+    controls: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    limit: float,
+    batch: Any = None,
+    model_for: Callable[[int], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every policy's episodes of ``task_obj`` from ``starts`` (qpos, qvel of episode i), all in
+    one batch: simulation b * n + i is policy b's episode i. ``controls(values, live)`` gives the live
+    rows' controls; ``model_for(step)``, where given, sets the batch's model for that step."""
+    n_episodes = len(starts[0])
     total = n_policies * n_episodes
-    batch = sim.new_batch(total)
+    batch = sim.new_batch(total) if batch is None else batch
     live = np.arange(total)
-    qpos, qvel = np.tile(qpos, (n_policies, 1)), np.tile(qvel, (n_policies, 1))
+    qpos, qvel = np.tile(starts[0], (n_policies, 1)), np.tile(starts[1], (n_policies, 1))
     sim.place(batch, live, qpos, qvel)
     states = sim.physics.states_from(qpos, qvel)
     returns = np.zeros(total)
@@ -164,9 +174,9 @@ def _evaluate_scheduled(
     step = 0
     while len(live):
         values = _joint_values(joint, sim, live, states, n_episodes)
-        task_obj.model_for_step(step_physics, step)
-        batch.set_models(step_physics.model.ptr)  # read again after every edit
-        next_states, diverged = sim.advance(batch, live, task_obj.controls(values, None), lengths[live] == 0)
+        if model_for is not None:
+            model_for(step)
+        next_states, diverged = sim.advance(batch, live, controls(values, live), lengths[live] == 0)
         rewards = np.where(diverged, 0.0, task_obj.batch_reward(next_states))
         returns[live] += rewards
         lengths[live] += 1
