@@ -435,11 +435,7 @@ def _check(spec: ExperimentSpec) -> None:
                 _fail(p, f"{key}.{field}", "a positive integer", getattr(preset, field))
         if preset.first_seed < 0:
             _fail(p, f"{key}.first_seed", "an integer >= 0", preset.first_seed)
-        if preset.model_samples is not None and (
-            not isinstance(preset.model_samples, int)
-            or isinstance(preset.model_samples, bool)
-            or preset.model_samples <= 0
-        ):
+        if preset.model_samples is not None and preset.model_samples <= 0:  # its type is checked on loading
             _fail(p, f"{key}.model_samples", "a positive integer", preset.model_samples)
         budgets = preset.target_budgets
         if not budgets or any(b <= 0 for b in budgets) or list(budgets) != sorted(set(budgets)):

@@ -22,10 +22,10 @@ warning during a step ends the episode with discount 0, reward 0 and the last
 finite state, as ``common.Environment`` does.
 
 Tasks whose model changes during an episode (``rollout_compatible = False``,
-the time-varying pendulum) are stepped through their environment, but their
-one-step queries are batched where an episode's first step runs on the model a
-reset leaves (``first_step_on_reset_model``); a task with a known tabular model
-steps its :class:`Table`. Every MuJoCo substep taken is
+the time-varying pendulum) are stepped through their environment; where the
+model depends on the step alone (``model_for_step``), their one-step queries
+(each an episode's first step) and evaluation episodes are batched on the model
+of the step. A task with a known tabular model steps its :class:`Table`. Every MuJoCo substep taken is
 counted (:func:`physics_substeps`).
 """
 
@@ -80,17 +80,14 @@ class Simulator:
         self.action_dim = 1 if self.actions.ndim == 1 else self.actions.shape[1]
         physics = getattr(self.env, "physics", None)
         self.fast = physics is not None and bool(getattr(self.env.task, "rollout_compatible", False))
-        # One-step queries are each an episode's first step: batched too where that
-        # step runs on the model a reset leaves (the model changing only later).
-        self.batched_queries = self.fast or (
-            physics is not None and bool(getattr(self.env.task, "first_step_on_reset_model", False))
-        )
+        # Where the model depends on the step alone (model_for_step), one-step queries, each
+        # an episode's first step, and lockstep evaluation episodes are batched too.
+        self.batched_queries = self.fast or (physics is not None and hasattr(self.env.task, "model_for_step"))
         self.key = f"{domain}/{task}"
         # MuJoCo substeps per control step (0 without physics: nothing to count).
         self.substeps = 0 if physics is None else int(round(self.env.control_timestep() / physics.timestep()))
         self.table: Table | None = None
-        # Where the model depends on the step alone, lockstep episodes that start together
-        # share one model a step, edited in this environment's physics (evaluation).
+        # Lockstep evaluation episodes share one model a step, edited in this environment's physics.
         self.step_env: dm_env.Environment | None = None
         if not self.batched_queries:
             known_model = suite.describe(domain, task, self.kwargs).known_model
@@ -98,13 +95,13 @@ class Simulator:
                 self.table = Table(known_model, self.time_limit())
             return
         if not self.fast:
-            # A reset environment of its own, never stepped, keeps the reset model
-            # for the queries while the stepped environment's model moves on.
+            # A reset environment of its own, on the model of an episode's first step and
+            # never stepped, answers the queries while the stepped environment's moves on.
             query_env = self.make_env(0)
             query_env.reset()
+            query_env.task.model_for_step(query_env.physics, 0)
             physics = query_env.physics
-            if hasattr(self.env.task, "model_for_step"):
-                self.step_env = self.make_env(0)
+            self.step_env = self.make_env(0)
         self.physics = physics
         self.model = physics.model.ptr
         self.n_sub = int(round(self.env.control_timestep() / physics.timestep()))

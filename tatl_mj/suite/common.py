@@ -218,15 +218,12 @@ class StateTask(base.Task):
       and the sampler starts many episodes with one call;
     - ``rollout_compatible``: False when the model itself changes during an
       episode (the time-varying pendulum), so the sampler must step the env;
-    - ``first_step_on_reset_model``: with ``rollout_compatible`` False, whether
-      an episode's first step still runs on the model a reset leaves (the
-      time-varying pendulum's schedule starts where reset puts it), so one-step
-      queries, each an episode's first step, run on the batched path;
     - ``model_for_step(physics, step)``: with ``rollout_compatible`` False, an
       optional method that edits ``physics``'s model into the one an episode's
       control step ``step`` (0, 1, ...) runs on, when that model depends on the
       step alone (the time-varying pendulum's schedule); ``before_step`` calls
-      it. Evaluation episodes, which all start together, then run in lockstep
+      it. One-step queries (each an episode's step 0) are then batched on that
+      model, and evaluation episodes, which all start together, run in lockstep
       on one model edited per step;
     - ``control_noise``: whether ``controls`` draws from ``random`` (the bicycle's
       rider). Without noise the sampler maps only the actions a call takes, with
@@ -235,7 +232,6 @@ class StateTask(base.Task):
     """
 
     rollout_compatible: bool = True
-    first_step_on_reset_model: bool = False
 
     @property
     def control_noise(self) -> bool:

@@ -198,8 +198,6 @@ class Task(common.StateTask):
         self.amplitude = amplitude
         # The model changes every step, so mujoco.rollout cannot replay it.
         self.rollout_compatible = not timevarying
-        # Reset and the first step both set schedule(0): a first step runs on the reset model.
-        self.first_step_on_reset_model = timevarying
         self.step_index = 0
 
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
