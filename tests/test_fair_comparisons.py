@@ -292,3 +292,31 @@ def test_epsilon_greedy_on_cells_takes_the_same_actions_and_draws_with_its_cache
     cached = _epsilon_greedy(Counted(), 0.3, np.random.default_rng(0), cells=True)
     assert [int(cached(c[None])[0]) for c in cells] == taken
     assert Counted.calls == 4  # once a cell
+
+
+def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_points():
+    """run_method evaluates each distinct policy object once; its repeated budgets get
+    the same episodes (the same starts), with the evaluation's time at the first only."""
+    from conftest import tiny_spec
+
+    spec = tiny_spec()
+    preset = spec.preset("tiny")
+    target = pipeline.description_of(spec.target)
+    rows = []
+
+    def policy(states):
+        rows.append(len(states))
+        return np.zeros((len(states), 1))
+
+    other = lambda states: np.ones((len(states), 1))  # noqa: E731
+    points = [
+        {"samples": b, "samples_used": 10, "target_transitions": b, "learn_s": 0.0, "warnings": []}
+        for b in (40, 120, 200)
+    ]
+    curve = pipeline._evaluated_curve(spec, preset, target, points, [policy, other, policy], eval_seed=3)
+    alone = pipeline._evaluated_curve(spec, preset, target, points[:1], [policy], eval_seed=3)
+    # Each step asks the policy for its own episodes' actions once, not once per budget.
+    assert sum(rows) == 2 * sum(alone[0]["steps"])
+    assert [curve[0][k] for k in ("returns", "steps")] == [curve[2][k] for k in ("returns", "steps")]
+    assert curve[0]["returns"] == alone[0]["returns"] and curve[1]["returns"] != curve[0]["returns"]
+    assert curve[2]["evaluate_s"] == 0.0 < curve[0]["evaluate_s"] and curve[2]["samples"] == 200

@@ -156,6 +156,20 @@ def test_tatl_uses_algorithm_2_through_the_problem_hooks():
     assert TATL(zeta=None, batch=50).learn(problem, _samples()).samples_used == 400
 
 
+def test_tatl_returns_the_same_policy_for_budgets_that_keep_the_same_samples():
+    """Algorithm 2 stops at 50 samples at every budget here, so budgets 200 and 400 of one
+    stream learn one policy, returned as the same object (evaluated once); another stream's
+    first 50 samples make another."""
+    problem = _problem(target_return=lambda policy: -10.0, model_return=lambda apprentice, policy: -9.0)
+    method, stream = TATL(zeta=0.1, batch=50), _samples()
+    small, large = method.learn(problem, stream.head(200)), method.learn(problem, stream.head(400))
+    assert small is large and small.samples_used == 50
+    other = method.learn(problem, _samples(seed=1))
+    assert other is not small and other.samples_used == 50
+    # Another method object (another setting) learns its own.
+    assert TATL(zeta=0.1, batch=50, actions="continuous").learn(problem, stream) is not small
+
+
 def test_uma_tl_starts_from_the_mapped_source_q():
     """Zero target rewards and one iteration: Q_1(., a) is the least-squares fit of
     gamma * max_b Q_S(chi_plus(s'), b) (= gamma |s'_0|) on action a's samples."""

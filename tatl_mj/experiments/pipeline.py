@@ -651,13 +651,23 @@ def _evaluated_curve(
     policies: list[Callable],
     eval_seed: int,
 ) -> list[dict]:
-    """The curve's points with their evaluations: every budget's policy in one lockstep batch."""
+    """The curve's points with their evaluations: every budget's policy in one lockstep batch.
+
+    A policy learned at several budgets (the same object) is evaluated once: its
+    episodes are the same at each, from the same starts and noise.
+    """
+    distinct = list({id(policy): policy for policy in policies}.values())
     start = time.perf_counter()
-    evaluated = evaluate_curve(spec, preset, policies, eval_seed, bool(target.steadiness))
+    evaluated = evaluate_curve(spec, preset, distinct, eval_seed, bool(target.steadiness))
     evaluate_s = time.perf_counter() - start
     steps = sum(int(n.sum()) for _, n, _ in evaluated)
+    of = {id(policy): result for policy, result in zip(distinct, evaluated)}
     curve: list[dict] = []
-    for point, (returns, lengths, calls) in zip(points, evaluated):
+    timed: set[int] = set()
+    for point, policy in zip(points, policies):
+        returns, lengths, calls = of[id(policy)]
+        share = evaluate_s * int(lengths.sum()) / max(steps, 1) if id(policy) not in timed else 0.0
+        timed.add(id(policy))
         steady = {} if calls is None else {"steadiness": steadiness(target, *calls)}
         learned = {k: point[k] for k in ("samples", "samples_used", "target_transitions")}
         curve.append(
@@ -670,8 +680,8 @@ def _evaluated_curve(
                 **steady,  # per episode, where the target declares steadiness (the bicycle's roll)
                 "learn_s": point["learn_s"],
                 "warnings": point["warnings"],
-                # The lockstep batch's time, shared out by episode steps.
-                "evaluate_s": evaluate_s * int(lengths.sum()) / max(steps, 1),
+                # The lockstep batch's time, shared out by episode steps (at a policy's first budget).
+                "evaluate_s": share,
             }
         )
     return curve
