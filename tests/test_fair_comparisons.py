@@ -276,7 +276,7 @@ def test_new_methods_are_registered_and_source_free_where_they_say():
 
 
 def test_epsilon_greedy_on_cells_takes_the_same_actions_and_draws_with_its_cache():
-    from tatl_mj.transfer.methods.target_fqi import _epsilon_greedy
+    from tatl_mj.transfer.methods.target_fqi import EpsilonGreedy
 
     class Counted:  # a tabular Q over 4 cells x 3 actions, counting its evaluations
         n_actions, calls = 3, 0
@@ -286,10 +286,10 @@ def test_epsilon_greedy_on_cells_takes_the_same_actions_and_draws_with_its_cache
             return (np.asarray(states)[:, 0].astype(int) * 7 + 1) % 3
 
     cells = np.random.default_rng(3).integers(4, size=(400, 1)).astype(float)
-    plain = _epsilon_greedy(Counted(), 0.3, np.random.default_rng(0))
+    plain = EpsilonGreedy(Counted(), 0.3, np.random.default_rng(0))
     taken = [int(plain(c[None])[0]) for c in cells]
     Counted.calls = 0
-    cached = _epsilon_greedy(Counted(), 0.3, np.random.default_rng(0), cells=True)
+    cached = EpsilonGreedy(Counted(), 0.3, np.random.default_rng(0), cells=True)
     assert [int(cached(c[None])[0]) for c in cells] == taken
     assert Counted.calls == 4  # once a cell
 

@@ -460,6 +460,62 @@ def test_time_varying_policies_run_in_lockstep_on_the_environments_own_steps():
             assert (total, steps) == (returns[i], lengths[i]) and steps > 100
 
 
+def _tv_greedy(seed: int, epsilon: float = 0.3):
+    from tatl_mj.transfer.features import make_features
+    from tatl_mj.transfer.fqi import LinearQ
+    from tatl_mj.transfer.methods.target_fqi import EpsilonGreedy
+
+    basis = {"kind": "rbf", "centers": 25, "low": [-3.0, -8.0], "high": [3.0, 8.0], "sigma": [0.6, 1.5]}
+    features = make_features({**basis, "periodic": [True, False]}, 2)
+    q = LinearQ(features, np.random.default_rng(5).normal(size=(3, features.size(2))))
+    return EpsilonGreedy(q, epsilon, np.random.default_rng(seed))
+
+
+@pytest.mark.parametrize("policy_kind", ["random", "epsilon-greedy"])
+@pytest.mark.parametrize("n,steps", [(1234, 200), (300, 150)])
+def test_time_varying_collections_run_in_lockstep_on_the_environments_own_steps(monkeypatch, policy_kind, n, steps):
+    # The plain loop: one environment seeded 17, episode after episode, one action a call
+    # (random ones drawn one at a time from default_rng(17)); the last episode cut at n.
+    kwargs = {"amplitude": 0.5}
+    lockstep = []
+    scheduled = collection._collect_scheduled
+    monkeypatch.setattr(
+        collection, "_collect_scheduled", lambda *a, **k: lockstep.append(scheduled(*a, **k)) or lockstep[-1]
+    )
+    if policy_kind == "random":
+        rng = np.random.default_rng(17)
+        reference, policy = (lambda s: np.array([rng.integers(3)])), None
+    else:
+        reference, policy = _tv_greedy(9), _tv_greedy(9)
+    env = suite.load("pendulum", "swingup_timevarying", task_kwargs={**kwargs, "random": 17})
+    want = sampling.policy_transitions(env, reference, n, np.asarray(suite.action_set("pendulum")), steps)
+    got = sampling.collect("pendulum", "swingup_timevarying", n, 17, policy, kwargs, max_episode_steps=steps)
+    assert len(lockstep) == 1 and lockstep[0] is not None  # the lockstep path ran
+    assert_same_transitions(got, want)
+    assert int(got.last.sum()) == -(-n // steps)
+    if policy is not None:  # the same draws, so the generator is where the plain loop leaves it
+        assert policy.rng.bit_generator.state == reference.rng.bit_generator.state
+
+
+def test_a_time_varying_collection_whose_episode_ends_early_runs_the_plain_loop(monkeypatch):
+    # Later calls' draws depend on where earlier episodes ended, so lockstep gives up.
+    kwargs = {"amplitude": 0.5}
+    sim = simulator.simulator_for("pendulum", "swingup_timevarying", kwargs, 2)
+    monkeypatch.setattr(sim.env.task, "batch_absorbing", lambda states: np.abs(states[:, 1]) > 3.0)
+    results = []
+    scheduled = collection._collect_scheduled
+    monkeypatch.setattr(
+        collection, "_collect_scheduled", lambda *a, **k: results.append(scheduled(*a, **k)) or results[-1]
+    )
+    policy, reference = _tv_greedy(4, epsilon=0.5), _tv_greedy(4, epsilon=0.5)
+    env = suite.load("pendulum", "swingup_timevarying", task_kwargs={**kwargs, "random": 2})
+    want = sampling.policy_transitions(env, reference, 700, np.asarray(suite.action_set("pendulum")), 200)
+    got = sampling.collect("pendulum", "swingup_timevarying", 700, 2, policy, kwargs, max_episode_steps=200)
+    assert results == [None]
+    assert_same_transitions(got, want)
+    assert policy.rng.bit_generator.state == reference.rng.bit_generator.state
+
+
 def steer_into_lean(gain):
     """A bicycle policy (torque from roll and roll rate): low gains fall, at varied times."""
     return lambda s: np.clip(gain * (s[:, 2:3] + 0.25 * s[:, 3:4]), -2.0, 2.0)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot
+from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot, make_features
 from tatl_mj.transfer.fqi import (
     ExtraTrees,
     LinearQ,
@@ -280,3 +280,34 @@ def test_tabular_q_indexes_one_cell_as_it_indexes_many_and_refuses_non_cells():
     for bad in ([[1.0, 2.0]], [[0.5, 0.0]], [[3.0, 0.0]], [[-1.0, 0.0]]):
         with pytest.raises(ValueError, match="cells of the grid"):
             q.index(np.array(bad))
+
+
+BASES = [
+    {"kind": "rbf", "centers": 16, "low": [-1.0, -2.0], "high": [1.0, 2.0], "sigma": [0.5, 1.0]},
+    {
+        "kind": "rbf",
+        "centers": 16,
+        "low": [-3.0, -2.0],
+        "high": [3.0, 2.0],
+        "sigma": [0.5, 1.0],
+        "periodic": [True, False],
+    },
+    {"kind": "linear"},
+    {"kind": "linear", "periodic": [True, False]},
+]
+
+
+@pytest.mark.parametrize("spec", BASES, ids=lambda s: s["kind"] + ("-periodic" if "periodic" in s else ""))
+def test_greedy_each_takes_each_rows_one_state_action(spec):
+    from tatl_mj.transfer.fqi import greedy_each
+
+    features = make_features(spec, 2)
+    rng = np.random.default_rng(1)
+    states = rng.uniform([-4.0, -3.0], [4.0, 3.0], size=(500, 2))
+    if getattr(features, "row_exact", False):  # the claim greedy_each relies on
+        np.testing.assert_array_equal(features(states), np.concatenate([features(s[None]) for s in states]))
+    q = LinearQ(features, rng.normal(size=(3, features.size(2))))
+    # Near ties, where a batched product's last bits could choose another action.
+    q = LinearQ(features, np.concatenate([q.weights[:1], q.weights[:1] * (1 + 1e-15), q.weights[2:]]))
+    one_by_one = np.array([q.greedy(s[None])[0] for s in states])
+    np.testing.assert_array_equal(greedy_each(q, states), one_by_one)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -14,6 +14,23 @@ IndexPolicy = Callable[[np.ndarray], np.ndarray]
 
 ValuePolicy = Callable[[np.ndarray], np.ndarray]
 """``policy(states (N, d)) -> (N, action_dim)`` action values in actuator units."""
+
+
+@runtime_checkable
+class DrawingPolicy(Protocol):
+    """An index policy whose random draws do not depend on the states it is asked about.
+
+    ``draws(calls)`` draws now, one row a call, what its next ``calls`` calls on one
+    state each would draw; ``act(states, draws)`` answers such calls for every row
+    of ``states`` at once, row i having drawn ``draws[i]``: the indices that the
+    one-state calls return. Episodes of one environment can then run in lockstep.
+    """
+
+    def __call__(self, states: np.ndarray) -> np.ndarray: ...
+
+    def draws(self, calls: int) -> np.ndarray: ...
+
+    def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray: ...
 
 
 def check_indices(indices: Any, n: int, n_actions: int) -> np.ndarray:

@@ -20,6 +20,7 @@ steps looked up instead of the environment's.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any, Callable
 
@@ -27,7 +28,7 @@ import dm_env
 import numpy as np
 
 from tatl_mj.sampling import schedule
-from tatl_mj.sampling.checks import IndexPolicy, check_indices
+from tatl_mj.sampling.checks import DrawingPolicy, IndexPolicy, check_indices
 from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, Table, episode_simulator, observed_state
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import integer
@@ -304,11 +305,18 @@ def _collect_loop(
     actions and policy calls in the same order, so the same transitions."""
     env, n_actions, table = sim.make_env(seed), len(sim.actions), sim.table
     if table is None:
-        if policy is None:
-            rng = np.random.default_rng(seed)
-            choose = lambda state: int(rng.integers(n_actions))  # noqa: E731
+        drawing = _RandomActions(np.random.default_rng(seed), n_actions) if policy is None else policy
+        if isinstance(drawing, DrawingPolicy):
+            # Every call's draws first, then the calls: the same actions, in lockstep where it can.
+            draws = drawing.draws(n)
+            if sim.step_env is not None and not sim.env.task.control_noise:
+                scheduled = _collect_scheduled(sim, n, seed, drawing, draws, max_episode_steps)
+                if scheduled is not None:
+                    return scheduled
+            rows = iter(range(n))
+            choose = lambda state: _one_action(drawing.act(state[None], draws[next(rows)][None]), n_actions)  # noqa: E731
         else:
-            choose = _policy_choice(policy, n_actions)
+            choose = _policy_choice(policy, n_actions)  # type: ignore[arg-type]
         transitions = _environment_loop(*_stepping(env, sim.actions), choose, n, max_episode_steps)
         SUBSTEPS[sim.key] += n * sim.substeps
         return transitions
@@ -325,7 +333,86 @@ def _collect_loop(
 
 def _policy_choice(policy: IndexPolicy, n_actions: int) -> Callable[[np.ndarray], int]:
     """The action index ``policy`` takes in one state, checked."""
-    return lambda state: int(check_indices(policy(state[None]), 1, n_actions)[0])
+    return lambda state: _one_action(policy(state[None]), n_actions)
+
+
+def _one_action(indices: Any, n_actions: int) -> int:
+    return int(check_indices(indices, 1, n_actions)[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class _RandomActions:
+    """Uniformly random indices, one a call from ``rng``, as a :class:`DrawingPolicy`."""
+
+    rng: np.random.Generator
+    n_actions: int
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        return self.rng.integers(self.n_actions, size=len(states))
+
+    def draws(self, calls: int) -> np.ndarray:
+        # One call gives the integers that ``calls`` calls of one each give.
+        return self.rng.integers(self.n_actions, size=(calls, 1))
+
+    def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        return draws[:, 0]
+
+
+def _collect_scheduled(
+    sim: Simulator,
+    n: int,
+    seed: int,
+    policy: DrawingPolicy,
+    draws: np.ndarray,
+    max_episode_steps: int | None,
+) -> Transitions | None:
+    """:func:`_collect_loop`'s transitions on a task whose model depends on the step alone
+    (``model_for_step``): its episodes run in lockstep, each control step of all of them
+    on the one model of that step.
+
+    The plain loop's episodes are the successive resets of one environment seeded
+    ``seed``, each running to its step limit, the last cut at ``n``; episode e's step t
+    is its call e * limit + t, which drew ``draws[e * limit + t]``. Where an episode
+    ends sooner (absorbing, diverged) later calls move, so None is returned and the
+    plain loop runs instead.
+    """
+    limit = min(sim.step_limit(None), np.inf if max_episode_steps is None else max_episode_steps)
+    if not np.isfinite(limit):
+        return None
+    length = int(np.ceil(limit))
+    n_episodes = -(-n // length)
+    env, task = sim.make_env(seed), sim.env.task
+    starts = []
+    for _ in range(n_episodes):
+        env.reset()
+        starts.append((np.array(env.physics.data.qpos), np.array(env.physics.data.qvel)))
+    qpos, qvel = (np.stack(column) for column in zip(*starts))
+    batch = sim.new_batch(n_episodes)
+    model_for = sim.scheduled_models(batch)
+    episodes = np.arange(n_episodes)
+    sim.place(batch, episodes, qpos, qvel)
+    state = sim.physics.states_from(qpos, qvel)
+    taken = np.minimum(length, n - episodes * length)  # the transitions each episode gives
+    states = np.empty((n_episodes, length, state.shape[1]))
+    next_states, actions, rewards = (
+        np.empty_like(states),
+        np.zeros((n_episodes, length), np.int64),
+        np.zeros((n_episodes, length)),
+    )
+    for t in range(length):
+        live = episodes[taken > t]
+        chosen = check_indices(policy.act(state[live], draws[live * length + t]), len(live), len(sim.actions))
+        model_for(t)
+        after, diverged = sim.advance(batch, live, task.controls(sim.actions[chosen], None), np.full(len(live), t == 0))
+        if diverged.any() or task.batch_absorbing(after).any():
+            return None
+        states[live, t], actions[live, t], next_states[live, t] = state[live], chosen, after
+        rewards[live, t] = task.batch_reward(after)
+        state[live] = after
+    kept = np.arange(length)[None, :] < taken[:, None]  # episode by episode, step by step
+    last = np.zeros((n_episodes, length), bool)
+    last[episodes, taken - 1] = True
+    return Transitions(states[kept], actions[kept], rewards[kept], next_states[kept], np.zeros(n, bool), last[kept])
 
 
 Reset = Callable[[], Any]

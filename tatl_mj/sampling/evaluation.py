@@ -136,16 +136,11 @@ def _evaluate_scheduled(
     for env in envs:
         env.reset()
     starts = tuple(np.stack([np.array(getattr(env.physics.data, f)) for env in envs]) for f in ("qpos", "qvel"))
-    task_obj, step_physics = sim.env.task, sim.step_env.physics  # type: ignore[union-attr]
+    task_obj = sim.env.task
     batch = sim.new_batch(n_policies * n_episodes)
-
-    def model_for(step: int) -> None:
-        task_obj.model_for_step(step_physics, step)
-        batch.set_models(step_physics.model.ptr)  # read again after every edit
-
     limit = min(sim.step_limit(None), np.inf if max_episode_steps is None else max_episode_steps)
     controls = lambda values, live: task_obj.controls(values, None)  # noqa: E731
-    return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit, batch, model_for)
+    return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit, batch, sim.scheduled_models(batch))
 
 
 def _lockstep(

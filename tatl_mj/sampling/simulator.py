@@ -36,7 +36,7 @@ import contextlib
 import functools
 import inspect
 import weakref
-from typing import Any
+from typing import Any, Callable
 
 import dm_env
 import mujoco
@@ -150,6 +150,18 @@ class Simulator:
             yield env
         finally:
             self._spare_env = env
+
+    def scheduled_models(self, batch: mujoco.batch.Batch) -> Callable[[int], None]:
+        """``model_for(step)``: gives ``batch`` the model of control step ``step`` of an
+        episode (a task whose model depends on the step alone, ``model_for_step``),
+        edited in the stepped environment's physics."""
+        task, physics = self.env.task, self.step_env.physics  # type: ignore[union-attr]
+
+        def model_for(step: int) -> None:
+            task.model_for_step(physics, step)
+            batch.set_models(physics.model.ptr)  # read again after every edit
+
+        return model_for
 
     def new_batch(self, nsim: int) -> mujoco.batch.Batch:
         """A Batch of ``nsim`` simulations of the task's model (slow to make: made once a call)."""

@@ -67,7 +67,14 @@ def periodic_difference(a: np.ndarray, b: np.ndarray, periodic: tuple[bool, ...]
 
 @runtime_checkable
 class Features(Protocol):
-    """A fixed basis phi: (N, d) states -> (N, k) float64."""
+    """A fixed basis phi: (N, d) states -> (N, k) float64.
+
+    A basis may set ``row_exact = True``: a call on N states gives each row bit
+    for bit what a call on that state alone gives (no product that sums across
+    coordinates runs with the batch as one of its dimensions, where BLAS may sum
+    in another order). A policy stepped one state a call can then be answered for
+    many episodes at once with the same actions (:func:`tatl_mj.transfer.fqi.greedy_each`).
+    """
 
     def __call__(self, states: np.ndarray) -> np.ndarray: ...
 
@@ -186,6 +193,11 @@ class RBF:
     def size(self, state_dim: int) -> int:
         return len(self.centers) + int(self.bias)
 
+    @property
+    def row_exact(self) -> bool:
+        """Periodic distances are formed state by state; plain ones are one product over the batch."""
+        return self.periodic is not None
+
     def __call__(self, states: np.ndarray) -> np.ndarray:
         raw = as_states(states, dim=self.centers.shape[1])
         if self.periodic is None:
@@ -250,6 +262,7 @@ class LinearFeatures:
 
     bias: bool = True
     periodic: tuple[bool, ...] | None = None
+    row_exact = True  # elementwise
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "periodic", periodic_mask(self.periodic, None, "LinearFeatures.periodic"))
@@ -286,6 +299,7 @@ class OneHot:
 
     n_rows: int
     n_cols: int
+    row_exact = True  # an indicator per row
 
     def __post_init__(self) -> None:
         for name in ("n_rows", "n_cols"):

@@ -209,6 +209,23 @@ class ZeroQ:
         return np.zeros(len(states), dtype=np.int64)
 
 
+def greedy_each(q: QFunction, states: np.ndarray) -> np.ndarray:
+    """(N,) each row's greedy action exactly as ``q.greedy(states[i:i + 1])`` gives it.
+
+    A product over a batch may sum in another order than a one-row product (the
+    last bits differ, and a near tie may then break the other way). A linear Q on
+    a ``row_exact`` basis evaluates the basis once and the product row by row;
+    any other Q is asked one state at a time.
+    """
+    s = np.asarray(states, np.float64)
+    if isinstance(q, LinearQ) and isinstance(q.features, OneHot):
+        return q.greedy(s)  # a column picked per row
+    if isinstance(q, LinearQ) and getattr(q.features, "row_exact", False):
+        phi, weights = q.features(s), q.weights.T
+        return np.array([np.argmax(phi[i : i + 1] @ weights) for i in range(len(s))], np.int64)
+    return np.array([q.greedy(s[i : i + 1])[0] for i in range(len(s))], np.int64)
+
+
 # --- FQI ----------------------------------------------------------------------
 
 
@@ -584,6 +601,7 @@ __all__ = [
     "TreeQ",
     "ZeroQ",
     "fitted_q_iteration",
+    "greedy_each",
     "make_regressor",
     "q_iteration",
 ]

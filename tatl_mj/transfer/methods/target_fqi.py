@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from typing import Callable
 
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, make_regressor
+from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
 from tatl_mj.transfer.method import Policy, TransferProblem, check_features
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transitions import Transitions
@@ -206,7 +205,7 @@ class TargetFQI:
                 problem.charge(collected)  # type: ignore[misc]
             else:
                 with warnings.catch_warnings(record=True) as caught:
-                    policy = None if q is None else _epsilon_greedy(q, self.epsilon, rng, problem.target.discrete)
+                    policy = None if q is None else EpsilonGreedy(q, self.epsilon, rng, problem.target.discrete)
                     more = problem.episode_samples(policy, size, round_)
                     data = more if data is None else Transitions.concatenate([data, more])
                     q = self.fit(problem, data, rng)
@@ -219,30 +218,52 @@ class TargetFQI:
             round_ += 1
 
 
-def _epsilon_greedy(
-    q: QFunction, epsilon: float, rng: np.random.Generator, cells: bool = False
-) -> Callable[[np.ndarray], np.ndarray]:
+@dataclasses.dataclass(frozen=True, eq=False)
+class EpsilonGreedy:
     """Index policy: greedy in ``q``, a uniformly random action with probability ``epsilon``.
 
+    Each call draws, from ``rng``, one uniform number per state (explore below
+    ``epsilon``) and then one random action per state, whatever the states are;
+    so what successive one-state calls draw can be drawn first (:meth:`draws`)
+    and the calls answered later, many at once (:meth:`act`), with the same
+    actions (an environment's episodes stepped in lockstep).
     With ``cells`` (a discrete target, stepped one state a call) each cell's greedy
     action is computed once: the same action, without a Q evaluation a step.
     """
-    known: dict[bytes, np.ndarray] = {}
 
-    def greedy_of(states: np.ndarray) -> np.ndarray:
-        if not cells or len(states) != 1:
-            return q.greedy(states)
+    q: QFunction
+    epsilon: float
+    rng: np.random.Generator
+    cells: bool = False
+    known: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    def greedy(self, states: np.ndarray) -> np.ndarray:
+        if not self.cells or len(states) != 1:
+            return self.q.greedy(states)
         key = np.asarray(states, np.float64).tobytes()
-        if key not in known:
-            known[key] = q.greedy(states)
-        return known[key]
+        if key not in self.known:
+            self.known[key] = self.q.greedy(states)
+        return self.known[key]
 
-    def policy(states: np.ndarray) -> np.ndarray:
-        greedy = greedy_of(states)
-        explore = rng.random(len(greedy)) < epsilon
-        return np.where(explore, rng.integers(q.n_actions, size=len(greedy)), greedy)
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        greedy = self.greedy(states)
+        explore = self.rng.random(len(greedy)) < self.epsilon
+        return np.where(explore, self.rng.integers(self.q.n_actions, size=len(greedy)), greedy)
 
-    return policy
+    def draws(self, calls: int) -> np.ndarray:
+        """(calls, 2): what ``calls`` successive one-state calls draw, in their order
+        (the uniform number, the random action), drawn now."""
+        out = np.empty((calls, 2))
+        random, integers, n = self.rng.random, self.rng.integers, self.q.n_actions
+        for i in range(calls):
+            out[i, 0] = random(1)[0]
+            out[i, 1] = integers(n, size=1)[0]
+        return out
+
+    def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """(N,) what one-state calls on each row of ``states`` return, the row having drawn ``draws``' row."""
+        greedy = greedy_each(self.q, states)
+        return np.where(draws[:, 0] < self.epsilon, draws[:, 1].astype(np.int64), greedy)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -274,6 +295,7 @@ class RL(TargetFQI):
 
 __all__ = [
     "DATA_PROTOCOLS",
+    "EpsilonGreedy",
     "RL",
     "UMATL",
     "GreedyPolicy",
