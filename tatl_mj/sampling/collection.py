@@ -15,7 +15,9 @@ the call's end (how many steps a call takes is a speed choice,
 Tasks stepped through their environment run one plain loop over it
 (:func:`_environment_loop`), which :func:`policy_transitions` runs on a given
 environment; a task with a known table runs the same loop with the table's
-steps looked up instead of the environment's.
+steps looked up instead of the environment's. One whose model depends on the
+step alone runs that loop's episodes in lockstep where its actions' draws can
+be made first (:func:`_collect_scheduled`): the same transitions.
 """
 
 from __future__ import annotations
@@ -300,7 +302,8 @@ def _collect_loop(
     max_episode_steps: int | None,
 ) -> Transitions:
     """collect() through one environment (time-varying models, tasks without physics),
-    random actions from ``np.random.default_rng(seed)``, one a step; a task with a known
+    random actions from ``np.random.default_rng(seed)``, one a step (a
+    :class:`DrawingPolicy`'s draws made first, in the same order); a task with a known
     table (:class:`Table`) looks its steps up instead, with the same resets, random
     actions and policy calls in the same order, so the same transitions."""
     env, n_actions, table = sim.make_env(seed), len(sim.actions), sim.table
