@@ -97,8 +97,8 @@ class TransferProblem:
     reset_samples: Callable[[int], Transitions] | None = None
     episode_samples: Callable[[Callable | None, int, int], Transitions] | None = None
     charge: Callable[[int], None] | None = None
-    # Rounds a method keeps to replay at a later budget of the same run (see
-    # TargetFQI._online); not part of the problem's identity.
+    # What a method keeps for a later budget of the same run (TargetFQI._online's
+    # rounds, TATL's policies); not part of the problem's identity.
     replays: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:

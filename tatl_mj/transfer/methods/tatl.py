@@ -113,11 +113,12 @@ class TATL:
         # Algorithm 2's apprentice is the fit on the first ``used`` samples alone, so a
         # later budget of the same run that keeps the same samples learns this very
         # policy: it gets the same object back, which is evaluated once (run_method).
-        kept = problem.replays.get(("ta-tl", id(self), used))
-        if kept is not None and kept[0] is self and _same_data(kept[1], target_samples.head(used)):
+        key, kept_samples = ("ta-tl", id(self), used), target_samples.head(used)
+        kept = problem.replays.get(key)
+        if kept is not None and kept[0] is self and _same_data(kept[1], kept_samples):
             return kept[2]
         policy = self._policy(problem, apprentice, used)
-        problem.replays[("ta-tl", id(self), used)] = (self, target_samples.head(used), policy)
+        problem.replays[key] = (self, kept_samples, policy)
         return policy
 
     def _policy(self, problem: TransferProblem, apprentice: Apprentice, used: int) -> Policy:
