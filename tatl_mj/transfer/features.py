@@ -23,6 +23,7 @@ and ``size(state_dim) -> k``. :func:`make_features` builds one from a plain dict
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from typing import Any, Protocol, Sequence, runtime_checkable
 
@@ -198,24 +199,45 @@ class RBF:
         """Periodic distances are formed state by state; plain ones are one product over the batch."""
         return self.periodic is not None
 
+    @functools.cached_property
+    def _diagonal(self) -> np.ndarray | None:
+        """L^-1's diagonal where L is diagonal and d <= 2, else None (see
+        :meth:`_wrapped_sq_distances_diagonal`). Derived on first use, so a basis
+        pickled without it (an older run's source) gets it too."""
+        inverse = self._inverse
+        # Beyond 2 coordinates einsum sums in SIMD lanes, in an order a plain sum does not reproduce.
+        if inverse.shape[0] > 2 or np.count_nonzero(inverse - np.diag(np.diag(inverse))):
+            return None
+        return np.diag(inverse).copy()
+
+    @functools.cached_property
+    def _center_norms(self) -> np.ndarray:
+        """|L^-1 c_j|^2 (k,): the same every call."""
+        return np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)
+
     def __call__(self, states: np.ndarray) -> np.ndarray:
         raw = as_states(states, dim=self.centers.shape[1])
         if self.periodic is None:
             s = raw @ self._inverse.T
-            sq = (
-                np.einsum("ij,ij->i", s, s)[:, None]
-                - 2.0 * s @ self._scaled_centers.T
-                + np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)[None, :]
-            )
+            sq = np.einsum("ij,ij->i", s, s)[:, None] - 2.0 * s @ self._scaled_centers.T + self._center_norms[None, :]
+            np.maximum(sq, 0.0, out=sq)  # rounding may leave a tiny negative
         else:
-            sq = self._wrapped_sq_distances(raw)
-        phi = np.exp(-0.5 * np.maximum(sq, 0.0))
-        return np.hstack([np.ones((len(raw), 1)), phi]) if self.bias else phi
+            sq = self._wrapped_sq_distances(raw)  # a sum of squares
+        sq *= -0.5
+        phi = np.exp(sq, out=sq)
+        if not self.bias:
+            return phi
+        out = np.empty((len(raw), phi.shape[1] + 1))
+        out[:, 0] = 1.0
+        out[:, 1:] = phi
+        return out
 
     def _wrapped_sq_distances(self, s: np.ndarray) -> np.ndarray:
         """|L^-1 wrap(s - c_j)|^2, (N, k). The wrap is not a dot product, so the
         differences are formed explicitly, in row blocks to bound memory."""
         k, d = self.centers.shape
+        if self._diagonal is not None:
+            return self._wrapped_sq_distances_diagonal(s)
         rows = max(1, (1 << 21) // (k * d))
         out = np.empty((len(s), k))
         for start in range(0, len(s), rows):
@@ -223,6 +245,23 @@ class RBF:
             z = diff @ self._inverse.T
             out[start : start + rows] = np.einsum("nkd,nkd->nk", z, z)
         return out
+
+    def _wrapped_sq_distances_diagonal(self, s: np.ndarray) -> np.ndarray:
+        """:meth:`_wrapped_sq_distances` for a diagonal L, bit for bit: the same
+        differences, wraps and products (the matrix form's other terms are exact
+        zeros), summed in the same order, one coordinate at a time over (N, k)."""
+        centers, periodic = self.centers, self.periodic
+        sq = None
+        for j, scale in enumerate(self._diagonal):
+            z = s[:, j : j + 1] - centers[None, :, j]
+            if periodic[j]:  # wrap_angle, in place
+                z += np.pi
+                np.mod(z, TWO_PI, out=z)
+                z -= np.pi
+            z *= scale
+            z *= z
+            sq = z if sq is None else np.add(sq, z, out=sq)
+        return sq
 
 
 def _split_count(total: int, spans: np.ndarray) -> list[int]:
