@@ -220,8 +220,9 @@ def test_periodic_rbf_coordinate_by_coordinate_equals_the_matrix_form_bit_for_bi
     # must be the (N, k, d) matrix form's bits, or every pendulum record would move.
     rng = np.random.default_rng(3)
     d = len(periodic)
-    rbf = RBF(rng.uniform(-4, 4, size=(37, d)), rng.uniform(0.1, 2.0, size=d), periodic=periodic)
-    states = rng.uniform(-9, 9, size=(1001, d))
+    # 700 centres: the 7,001 states are formed in three row blocks.
+    rbf = RBF(rng.uniform(-4, 4, size=(700, d)), rng.uniform(0.1, 2.0, size=d), periodic=periodic)
+    states = rng.uniform(-9, 9, size=(7001, d))
     fast = rbf(states)
     matrix_form = RBF(rbf.centers, np.diag(rbf.sigma), periodic=periodic)
     matrix_form.__dict__["_diagonal"] = None  # the general path

@@ -249,19 +249,27 @@ class RBF:
     def _wrapped_sq_distances_diagonal(self, s: np.ndarray) -> np.ndarray:
         """:meth:`_wrapped_sq_distances` for a diagonal L, bit for bit: the same
         differences, wraps and products (the matrix form's other terms are exact
-        zeros), summed in the same order, one coordinate at a time over (N, k)."""
-        centers, periodic = self.centers, self.periodic
-        sq = None
-        for j, scale in enumerate(self._diagonal):
-            z = s[:, j : j + 1] - centers[None, :, j]
-            if periodic[j]:  # wrap_angle, in place
-                z += np.pi
-                np.mod(z, TWO_PI, out=z)
-                z -= np.pi
-            z *= scale
-            z *= z
-            sq = z if sq is None else np.add(sq, z, out=sq)
-        return sq
+        zeros), summed in the same order, one coordinate at a time over (rows, k)."""
+        centers, periodic, scales = self.centers, self.periodic, self._diagonal
+        k = len(centers)
+        rows = max(1, (1 << 21) // k)  # one (rows, k) scratch array beside the output
+        out = np.empty((len(s), k))
+        z = np.empty((min(rows, len(s)), k))
+        for start in range(0, len(s), rows):
+            block, part = s[start : start + rows], out[start : start + rows]
+            scratch = z[: len(block)]
+            for j, scale in enumerate(scales):
+                target = part if j == 0 else scratch
+                np.subtract(block[:, j : j + 1], centers[None, :, j], out=target)
+                if periodic[j]:  # wrap_angle, in place
+                    target += np.pi
+                    np.mod(target, TWO_PI, out=target)
+                    target -= np.pi
+                target *= scale
+                target *= target
+                if j:
+                    part += target
+        return out
 
 
 def _split_count(total: int, spans: np.ndarray) -> list[int]:
