@@ -235,9 +235,9 @@ class RBF:
     def _wrapped_sq_distances(self, s: np.ndarray) -> np.ndarray:
         """|L^-1 wrap(s - c_j)|^2, (N, k). The wrap is not a dot product, so the
         differences are formed explicitly, in row blocks to bound memory."""
-        k, d = self.centers.shape
         if self._diagonal is not None:
             return self._wrapped_sq_distances_diagonal(s)
+        k, d = self.centers.shape
         rows = max(1, (1 << 21) // (k * d))
         out = np.empty((len(s), k))
         for start in range(0, len(s), rows):
