@@ -512,12 +512,15 @@ def transfer_problem(
     seed: int,
     ledger: Ledger | None = None,
     placebo: bool = False,
+    uses_source: bool = True,
 ) -> "method.TransferProblem":
     """The problem a transfer method learns (see ``tatl_mj.transfer.method``), with its hooks.
 
     Every hook that touches the real target charges ``ledger`` (a fresh one if None).
     ``placebo`` puts an untrained source Q of the trained one's shape in
     place of the trained one (``tatl_mj.transfer.placebo``), drawn from this seed.
+    Without ``uses_source`` the source Q, mapping and source simulator are withheld
+    (``method.Withheld``): the method's record then cannot depend on them.
     """
     ledger = Ledger() if ledger is None else ledger
     source, target = description_of(spec.source), description_of(spec.target)
@@ -533,10 +536,15 @@ def transfer_problem(
     source_q = artifacts.source_q
     if placebo:
         source_q = placebo_q(source_q, derive_seed(seed, spec.stream_name, "placebo"))
-    return method.TransferProblem(
+    source_parts: dict[str, Any] = dict(
         source_q=source_q,
         mapping=QueriedMapping(artifacts.mapping, partial(_source_region, spec.source, source)),
         source_step=partial(_source_step, spec.source, source),
+    )
+    if not uses_source:
+        source_parts = {name: method.Withheld(name) for name in source_parts}
+    return method.TransferProblem(
+        **source_parts,
         source=source,
         target=target,
         seed=derive_seed(seed, spec.stream_name, "target-learning"),
@@ -570,7 +578,8 @@ def learned_policy(
     (``tatl render``) both call it, so a clip shows the evaluated policy.
     """
     if problem is None:
-        problem = transfer_problem(spec, preset, artifacts, seed, placebo=_placebo(transfer))
+        uses_source = method.contract(transfer).uses_source
+        problem = transfer_problem(spec, preset, artifacts, seed, placebo=_placebo(transfer), uses_source=uses_source)
     return transfer.learn(problem, artifacts.target_stream.head(budget))
 
 
@@ -589,8 +598,8 @@ def run_method(
     if transfer is None:
         transfer = methods_from_spec(spec, preset, [method_name])[method_name]
     ledger = Ledger()
-    problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer))
     hooks = method.contract(transfer)
+    problem = transfer_problem(spec, preset, artifacts, seed, ledger, _placebo(transfer), hooks.uses_source)
     # A method that uses no target samples (an oracle, a reference) learns the same
     # policy at every budget: it is learned and evaluated once and its point repeated.
     budgets = preset.target_budgets if hooks.uses_samples else preset.target_budgets[:1]
@@ -613,7 +622,8 @@ def run_method(
         "final_return": curve[-1]["mean_return"],
         "random_return": artifacts.random_return,
         "data": hooks.data,
-        "mapping_target_samples": artifacts.mapping_target_samples,
+        # The target samples its mapping took (none for a method without a source).
+        "mapping_target_samples": artifacts.mapping_target_samples if hooks.uses_source else 0,
         "algorithm2_samples": None if final_used is None else int(final_used),
     }
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import json
 import os
 import pickle
 import platform
@@ -314,6 +315,55 @@ def _plan(
     return units, custom
 
 
+# What a method unit's record may depend on besides its method and seed: everything in
+# its spec but the experiment's names, its mapping and its other methods.
+_NOT_SHARED = ("name", "title", "paper_claim", "path", "mapping", "methods", "streams")
+
+
+def _share_key(spec: ExperimentSpec, preset: str, unit: Unit, custom: dict[str, Any]) -> str | None:
+    """Equal for method units that compute the same record, but its ``experiment``: a method
+    without a source (``uses_source`` False: the problem withholds the source Q, mapping
+    and source simulator) in experiments that draw the same streams and share everything
+    else; None for any other unit."""
+    if unit.name == SOURCE_UNIT or unit.name in custom:
+        return None
+    transfer = pipeline.methods_from_spec(spec, spec.preset(preset), [unit.name])[unit.name]
+    if contract(transfer).uses_source:
+        return None
+    rest = {k: v for k, v in spec_to_dict(spec).items() if k not in _NOT_SHARED}
+    parts = [spec.stream_name, unit.seed, unit.name, preset, spec.methods.get(unit.name), repr(transfer), rest]
+    return json.dumps(parts, sort_keys=True, default=repr)
+
+
+def _shared(
+    specs: dict[str, ExperimentSpec], preset: str, units: list[Unit], custom: dict[str, Any]
+) -> list[list[Unit]]:
+    """The groups (two or more) of method units that compute the same record, in run order."""
+    groups: dict[str, list[Unit]] = {}
+    for unit in units:
+        key = _share_key(specs[unit.experiment], preset, unit, custom)
+        if key is not None:
+            groups.setdefault(key, []).append(unit)
+    return [group for group in groups.values() if len(group) > 1]
+
+
+def shared_record(record: dict, unit: Unit, origin: Unit) -> dict:
+    """``origin``'s record as ``unit``'s: the same curve, marked as shared, with none of the
+    work (its wall time, substeps and phase timings are the origin's alone)."""
+    curve = [{**point, "learn_s": 0.0, "evaluate_s": 0.0} for point in record["curve"]]
+    first = record.get("shared_from", str(origin))
+    if first == str(unit):  # its own record was lost and comes back from a copy of it
+        first = str(origin)
+    return {
+        **record,
+        "experiment": unit.experiment,
+        "curve": curve,
+        "shared_from": first,
+        "wall_s": 0.0,
+        "physics_substeps": {},
+    }
+
+
 def _check_applies(spec: ExperimentSpec, name: str) -> None:
     """A built-in the spec does not list runs with its defaults: refuse it now if it cannot
     run on the spec's tasks (a grid planner on a pendulum), naming why."""
@@ -357,6 +407,14 @@ class _Recorder:
             run_dir.write_unit(unit.experiment, unit.seed, unit.name, result["record"], result.get("blob"))
             self.done.add(unit)
             path.unlink(missing_ok=True)  # an earlier run's traceback of this unit no longer applies
+        self.bar.update(1)
+
+    def copy(self, origin: Unit, unit: Unit) -> None:
+        """Writes ``origin``'s finished record as ``unit``'s (see :func:`shared_record`)."""
+        found = read_json(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
+        self.run_dir.write_unit(unit.experiment, unit.seed, unit.name, shared_record(found, unit, origin))
+        self.done.add(unit)
+        self.run_dir.failure_path(unit.experiment, unit.seed, unit.name).unlink(missing_ok=True)
         self.bar.update(1)
 
     def skip(self, unit: Unit, why: str) -> None:
@@ -421,10 +479,23 @@ def _run_locked(
     bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
     record = _Recorder(run_dir, done, bar)
 
+    # A method without a source runs once for experiments that share its streams and
+    # target: the others get its record (now, where one of them is done already).
+    copies: dict[Unit, list[Unit]] = {}
+    for group in _shared(by_name, preset, all_units, custom):
+        finished = [u for u in group if u in done]
+        origin = finished[0] if finished else group[0]
+        copies[origin] = [u for u in group if u not in done and u != origin]
+    for origin, aliases in copies.items():
+        if origin in done:
+            for alias in aliases:
+                record.copy(origin, alias)
+    followers = {alias for aliases in copies.values() for alias in aliases}
+
     # Each experiment and seed's method units wait for its source unit, and start when it is done.
     waiting: dict[tuple[str, int], list[Unit]] = {}
     for unit in all_units:
-        if unit.name != SOURCE_UNIT and unit not in done:
+        if unit.name != SOURCE_UNIT and unit not in done and unit not in followers:
             waiting.setdefault((unit.experiment, unit.seed), []).append(unit)
 
     def methods_of(source: Unit) -> list[Job]:
@@ -432,12 +503,19 @@ def _run_locked(
         if source not in done:
             for unit in units:
                 record.skip(unit, "its source unit failed")
+                for alias in copies.get(unit, []):
+                    record.skip(alias, f"the unit it shares, {unit}, did not finish")
             return []
         blob = run_dir.read_blob(source.experiment, source.seed) if units else None
         return [(u, (by_name[u.experiment], preset, u, blob, custom.get(u.name))) for u in units]
 
     def then(unit: Unit, result: dict) -> list[Job]:
         record(unit, result)
+        for alias in copies.get(unit, []):
+            if unit in done:
+                record.copy(unit, alias)
+            else:
+                record.skip(alias, f"the unit it shares, {unit}, did not finish")
         return methods_of(unit) if unit.name == SOURCE_UNIT else []
 
     sources = [u for u in all_units if u.name == SOURCE_UNIT]

@@ -148,10 +148,13 @@ class ExperimentSpec:
     # A sweep over target conditions: one or two target task_kwargs, each a list of
     # values; ``conditions`` expands it into one experiment per combination.
     sweep: dict = dataclasses.field(default_factory=dict)
-    # Set on a sweep's conditions: the swept values, and the name their random
-    # streams derive from (the sweep's own, so each condition draws what the spec
-    # run alone with those task_kwargs draws).
+    # Set on a sweep's conditions: the swept values.
     condition: dict = dataclasses.field(default_factory=dict)
+    # The name every random stream derives from (empty: ``name``). A sweep's conditions
+    # take the sweep's, so each draws what the spec run alone with those task_kwargs
+    # draws; a variant that changes only the mapping names its parent, so both draw the
+    # same source data, target samples and evaluation starts (a paired comparison), and
+    # their methods without a source are computed once (``tatl_mj.experiments.runner``).
     streams: str = ""
 
     def preset(self, name: str) -> Preset:
@@ -183,11 +186,8 @@ def conditions(spec: ExperimentSpec) -> list[ExperimentSpec]:
     for combo in grids:
         suffix = ".".join(f"{k}-{_value_text(v)}" for k, v in combo)
         target = dataclasses.replace(spec.target, task_kwargs={**spec.target.task_kwargs, **dict(combo)})
-        out.append(
-            dataclasses.replace(
-                spec, name=f"{spec.name}.{suffix}", target=target, sweep={}, condition=dict(combo), streams=spec.name
-            )
-        )
+        name, condition, streams = f"{spec.name}.{suffix}", dict(combo), spec.stream_name
+        out.append(dataclasses.replace(spec, name=name, target=target, sweep={}, condition=condition, streams=streams))
     return out
 
 
@@ -383,8 +383,8 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
 
 def _check_sweep(spec: ExperimentSpec) -> None:
     p = spec.path
-    if spec.condition or spec.streams:
-        raise SpecError(f"{p}: keys 'condition' and 'streams' are set by a sweep, not by a spec; use [sweep]")
+    if spec.condition:
+        raise SpecError(f"{p}: key 'condition' is set by a sweep, not by a spec; use [sweep]")
     if not spec.sweep:
         return
     if len(spec.sweep) > 2:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable, NoReturn, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -173,6 +173,11 @@ class TransferMethod(Protocol):
       else: only what the problem's hooks hand out is counted; default "shared");
     - ``source``: ``"trained"`` or ``"placebo"`` (the problem then holds an
       untrained source Q of the trained one's shape; default "trained");
+    - ``uses_source``: False for a method that reads no source Q, mapping or source
+      simulator (the problem then withholds them: reading one raises
+      :class:`SourceWithheld`), so experiments that share its target, data and
+      random streams and differ only in their mapping get the same record, and
+      ``tatl run`` computes it once (default True);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n).
     """
@@ -191,6 +196,7 @@ class Contract:
     data: str = "shared"
     source: str = "trained"
     check: Callable[[TaskDescription, TaskDescription], None] | None = None
+    uses_source: bool = True
 
 
 def contract(method: Any) -> Contract:
@@ -200,7 +206,31 @@ def contract(method: Any) -> Contract:
         data=str(getattr(method, "data", "shared")),
         source=str(getattr(method, "source", "trained")),
         check=getattr(method, "check", None),
+        uses_source=bool(getattr(method, "uses_source", True)),
     )
+
+
+class SourceWithheld(RuntimeError):
+    """A method that declares ``uses_source = False`` read the source Q, mapping or source simulator."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Withheld:
+    """Stands in for ``problem.<field>`` for a method without a source: any use raises
+    :class:`SourceWithheld`, so its record cannot depend on what it does not declare."""
+
+    field: str
+
+    def _refuse(self) -> NoReturn:
+        raise SourceWithheld(f"problem.{self.field} was read by a method that declares uses_source = False")
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):  # copy, pickle and repr probe dunders: answer as a plain object would
+            raise AttributeError(name)
+        self._refuse()
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        self._refuse()
 
 
 def samples_used(policy: Any, budget: int) -> int:
@@ -232,8 +262,10 @@ __all__ = [
     "Contract",
     "Model",
     "Policy",
+    "SourceWithheld",
     "TransferMethod",
     "TransferProblem",
+    "Withheld",
     "check_features",
     "contract",
     "samples_used",

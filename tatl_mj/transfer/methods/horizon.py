@@ -506,6 +506,11 @@ class HorizonTATL(TATL):
     def uses_samples(self) -> bool:
         return self.model != "oracle"
 
+    @property
+    def uses_source(self) -> bool:
+        """False for ``apprentice-upright`` (the zero reference reads no source at all)."""
+        return self.reference == "source"
+
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)
         owner = type(self).__name__

@@ -127,6 +127,11 @@ class TargetFQI:
             raise ValueError(f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none")
 
     @property
+    def uses_source(self) -> bool:
+        """False for the learners that never see the mapped source Q (``rl``, ``apprentice-fqi``)."""
+        return self.source_use != "none"
+
+    @property
     def linear_features(self) -> dict:
         return {"kind": "linear"} if self.features is None else self.features
 
