@@ -69,11 +69,14 @@ def test_shared_units_run_once_and_equal_the_variant_run_alone(tmp_path):
     }
     # ta-tl reads the mapping: computed in each experiment.
     assert "shared_from" not in records.read_json(pair.record_path(variant.name, 0, "ta-tl"))
-    # The source units draw the same streams: the same source Q and target samples.
-    assert (
-        records.read_json(pair.record_path(variant.name, 0, "source"))["random_return"]
-        == records.read_json(pair.record_path(parent.name, 0, "source"))["random_return"]
-    )
+    # The variant's source unit took the parent's source Q, target samples and random
+    # return, and learned only its map: its record is the one it gets alone, but the work.
+    costs = COSTS | {"timings", "blob_sha256"}
+    shared, own = (records.read_json(d.record_path(variant.name, 0, "source")) for d in (pair, single))
+    assert {k: v for k, v in shared.items() if k not in costs} == {k: v for k, v in own.items() if k not in costs}
+    assert shared["timings"]["source_learning_s"] == shared["timings"]["target_sampling_s"] == 0.0
+    assert own["timings"]["source_learning_s"] > 0.0
+    assert shared["random_return"] == records.read_json(pair.record_path(parent.name, 0, "source"))["random_return"]
 
 
 def test_a_lost_copy_or_origin_comes_back_without_recomputing(tmp_path, monkeypatch):
@@ -133,3 +136,22 @@ def test_a_spec_names_the_streams_it_draws_and_its_sweeps_keep_them():
     table["condition"] = {"gain": 1.0}
     with pytest.raises(spec_mod.SpecError, match="key 'condition' is set by a sweep"):
         spec_mod.parse_spec(table, "x.toml")
+
+
+def test_a_lost_source_unit_takes_the_first_experiments_artefacts_again(tmp_path, monkeypatch):
+    parent, variant = _pair()
+    run = lambda: runner.run([parent, variant], "tiny", [0], tmp_path, workers=1, progress=False, methods=["ta-tl"])  # noqa: E731
+    run()
+    folder = records.RunDirectory(tmp_path)
+    costs = COSTS | {"timings", "blob_sha256"}
+    before = {
+        k: v for k, v in records.read_json(folder.record_path(variant.name, 0, "source")).items() if k not in costs
+    }
+    learned = []
+    real = pipeline.learn_source
+    monkeypatch.setattr(pipeline, "learn_source", lambda *a: learned.append(a[0].name) or real(*a))
+    folder.record_path(variant.name, 0, "source").unlink()
+    run()
+    after = records.read_json(folder.record_path(variant.name, 0, "source"))
+    assert learned == [variant.name] and after["timings"]["source_learning_s"] == 0.0
+    assert {k: v for k, v in after.items() if k not in costs} == before

@@ -236,35 +236,49 @@ def _learn_mapping(
     return mappings.MAPPINGS[spec.mapping.kind](inputs)
 
 
-def learn_source(spec: ExperimentSpec, preset: Preset, seed: int) -> SourceArtifacts:
-    """Phases I and II for one seed."""
-    timings = {}
-    start = time.perf_counter()
-    source_q, source_samples = _source_q(spec, preset, seed)
-    timings["source_learning_s"] = time.perf_counter() - start
+def learn_source(
+    spec: ExperimentSpec, preset: Preset, seed: int, shared: SourceArtifacts | None = None
+) -> SourceArtifacts:
+    """Phases I and II for one seed.
 
-    start = time.perf_counter()
-    stream_size = max(max(preset.target_budgets), preset.alignment_samples)
-    target_stream = random_transitions(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
-    timings["target_sampling_s"] = time.perf_counter() - start
+    ``shared``: the artefacts of an experiment that differs from this one only in its
+    mapping and draws the same streams (``runner``): their source Q, target samples and
+    random return are this one's, so only the mapping is learned (no phase is done twice).
+    """
+    timings = {"source_learning_s": 0.0, "target_sampling_s": 0.0}
+    if shared is None:
+        start = time.perf_counter()
+        source_q, source_samples = _source_q(spec, preset, seed)
+        timings["source_learning_s"] = time.perf_counter() - start
+
+        start = time.perf_counter()
+        stream_size = max(max(preset.target_budgets), preset.alignment_samples)
+        target_stream = random_transitions(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
+        timings["target_sampling_s"] = time.perf_counter() - start
+    else:
+        source_q, source_samples, target_stream = shared.source_q, shared.source_samples, shared.target_stream
 
     start = time.perf_counter()
     mapping, mapping_record, n_map_source, n_map_target = _learn_mapping(spec, preset, seed, target_stream)
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    returns, _ = target_returns(
-        spec,
-        preset,
-        random_policy(spec.target, derive_seed(seed, "random-policy")),
-        derive_seed(seed, spec.stream_name, "evaluation"),
-    )
+    if shared is None:
+        returns, _ = target_returns(
+            spec,
+            preset,
+            random_policy(spec.target, derive_seed(seed, "random-policy")),
+            derive_seed(seed, spec.stream_name, "evaluation"),
+        )
+        random_return = float(np.mean(returns))
+    else:
+        random_return = shared.random_return
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
         source_q=source_q,
         mapping=mapping,
         target_stream=target_stream,
-        random_return=float(np.mean(returns)),
+        random_return=random_return,
         mapping_target_samples=n_map_target,
         mapping_source_samples=n_map_source,
         source_samples=source_samples,

@@ -113,7 +113,9 @@ def _work(
     preset = spec.preset(preset_name)
     substeps = sampling.physics_substeps()
     if unit.name == SOURCE_UNIT:
-        artifacts = pipeline.learn_source(spec, preset, unit.seed)
+        # source_blob here: the artefacts of an experiment that differs only in its mapping.
+        shared = pickle.loads(source_blob) if source_blob is not None else None
+        artifacts = pipeline.learn_source(spec, preset, unit.seed, shared)
         blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
         record = {
             "experiment": spec.name,
@@ -320,25 +322,33 @@ def _plan(
 _NOT_SHARED = ("name", "title", "paper_claim", "path", "mapping", "methods", "streams")
 
 
+def _experiment_key(spec: ExperimentSpec, preset: str) -> list:
+    """What an experiment's units may depend on besides their own settings and seed."""
+    rest = {k: v for k, v in spec_to_dict(spec).items() if k not in _NOT_SHARED}
+    return [spec.stream_name, preset, rest]
+
+
 def _share_key(spec: ExperimentSpec, preset: str, unit: Unit, custom: dict[str, Any]) -> str | None:
-    """Equal for method units that compute the same record, but its ``experiment``: a method
-    without a source (``uses_source`` False: the problem withholds the source Q, mapping
-    and source simulator) in experiments that draw the same streams and share everything
-    else; None for any other unit."""
-    if unit.name == SOURCE_UNIT or unit.name in custom:
+    """Equal for units whose work is shared: source units of experiments that draw the same
+    streams and differ only in their mapping and methods (the source Q, target samples and
+    random return are one computation; each learns its own mapping), and in those a method
+    without a source (``uses_source`` False: the problem withholds the source Q, mapping and
+    source simulator), whose record is the same but its ``experiment``; None for any other."""
+    if unit.name == SOURCE_UNIT:
+        return json.dumps([*_experiment_key(spec, preset), unit.seed], sort_keys=True, default=repr)
+    if unit.name in custom:
         return None
     transfer = pipeline.methods_from_spec(spec, spec.preset(preset), [unit.name])[unit.name]
     if contract(transfer).uses_source:
         return None
-    rest = {k: v for k, v in spec_to_dict(spec).items() if k not in _NOT_SHARED}
-    parts = [spec.stream_name, unit.seed, unit.name, preset, spec.methods.get(unit.name), repr(transfer), rest]
+    parts = [*_experiment_key(spec, preset), unit.seed, unit.name, spec.methods.get(unit.name), repr(transfer)]
     return json.dumps(parts, sort_keys=True, default=repr)
 
 
 def _shared(
     specs: dict[str, ExperimentSpec], preset: str, units: list[Unit], custom: dict[str, Any]
 ) -> list[list[Unit]]:
-    """The groups (two or more) of method units that compute the same record, in run order."""
+    """The groups (two or more) of units that share work (:func:`_share_key`), in run order."""
     groups: dict[str, list[Unit]] = {}
     for unit in units:
         key = _share_key(specs[unit.experiment], preset, unit, custom)
@@ -481,11 +491,15 @@ def _run_locked(
 
     # A method without a source runs once for experiments that share its streams and
     # target: the others get its record (now, where one of them is done already).
+    # A source unit of such experiments takes its source Q and target samples from the
+    # first of them (once that is done) and learns only its own mapping.
     copies: dict[Unit, list[Unit]] = {}
+    later_sources: dict[Unit, list[Unit]] = {}
     for group in _shared(by_name, preset, all_units, custom):
         finished = [u for u in group if u in done]
         origin = finished[0] if finished else group[0]
-        copies[origin] = [u for u in group if u not in done and u != origin]
+        rest = [u for u in group if u not in done and u != origin]
+        (later_sources if origin.name == SOURCE_UNIT else copies)[origin] = rest
     for origin, aliases in copies.items():
         if origin in done:
             for alias in aliases:
@@ -509,6 +523,11 @@ def _run_locked(
         blob = run_dir.read_blob(source.experiment, source.seed) if units else None
         return [(u, (by_name[u.experiment], preset, u, blob, custom.get(u.name))) for u in units]
 
+    def sources_after(origin: Unit) -> list[Job]:
+        """The source units waiting for ``origin``'s artefacts (computed alone if it failed)."""
+        blob = run_dir.read_blob(origin.experiment, origin.seed) if origin in done else None
+        return [(u, (by_name[u.experiment], preset, u, blob)) for u in later_sources.get(origin, [])]
+
     def then(unit: Unit, result: dict) -> list[Job]:
         record(unit, result)
         for alias in copies.get(unit, []):
@@ -516,13 +535,14 @@ def _run_locked(
                 record.copy(unit, alias)
             else:
                 record.skip(alias, f"the unit it shares, {unit}, did not finish")
-        return methods_of(unit) if unit.name == SOURCE_UNIT else []
+        return methods_of(unit) + sources_after(unit) if unit.name == SOURCE_UNIT else []
 
     sources = [u for u in all_units if u.name == SOURCE_UNIT]
-    jobs = [(u, (by_name[u.experiment], preset, u, None)) for u in sources if u not in done]
+    waiting_sources = {u for later in later_sources.values() for u in later}
+    jobs = [(u, (by_name[u.experiment], preset, u, None)) for u in sources if u not in done | waiting_sources]
     for source in sources:
         if source in done:
-            jobs += methods_of(source)
+            jobs += methods_of(source) + sources_after(source)
     dispatch(jobs, then)
     bar.close()
 
