@@ -64,6 +64,8 @@ def test_shared_units_run_once_and_equal_the_variant_run_alone(tmp_path):
     assert copy["shared_from"] == "ip_to_flipped_ip/seed0/rl" and "shared_from" not in origin
     assert copy["wall_s"] == 0.0 and copy["physics_substeps"] == {} and origin["wall_s"] > 0
     assert all(p["learn_s"] == p["evaluate_s"] == 0.0 for p in copy["curve"])
+    assert both["experiments"][variant.name]["methods"]["rl"]["shared_from"] == {"0": "ip_to_flipped_ip/seed0/rl"}
+    assert both["experiments"][variant.name]["methods"]["ta-tl"]["shared_from"] == {}
     assert {k: v for k, v in _result(copy).items() if k != "experiment"} == {
         k: v for k, v in _result(origin).items() if k != "experiment"
     }
@@ -155,3 +157,17 @@ def test_a_lost_source_unit_takes_the_first_experiments_artefacts_again(tmp_path
     after = records.read_json(folder.record_path(variant.name, 0, "source"))
     assert learned == [variant.name] and after["timings"]["source_learning_s"] == 0.0
     assert {k: v for k, v in after.items() if k not in costs} == before
+
+
+def test_copied_rows_count_once_across_experiments():
+    from tatl_mj.experiments import summary
+
+    scores = [[0.0, 0.5], [0.0, 0.9], [0.0, 1.0], [0.0, 0.2]]
+    own = {"seeds": [0, 1, 2, 3], "normalised": scores}
+    copied = {**own, "shared_from": {str(s): f"a/seed{s}/rl" for s in range(4)}}
+    both = summary.aggregate({"a": {"methods": {"rl": own}}, "b": {"methods": {"rl": copied}}})
+    assert (both["rl"]["experiments"], both["rl"]["runs"]) == (1, 4)
+    alone = summary.aggregate({"b": {"methods": {"rl": copied}}})  # its origin is not in this summary
+    assert (alone["rl"]["experiments"], alone["rl"]["runs"]) == (1, 4)
+    twice = summary.aggregate({"a": {"methods": {"rl": own}}, "b": {"methods": {"rl": own}}})
+    assert (twice["rl"]["experiments"], twice["rl"]["runs"]) == (2, 8)

@@ -316,7 +316,8 @@ def aggregate_table(summary: dict) -> str:
         "",
         "Each method's normalised final score (at the largest budget) over every experiment with a "
         "reference return and every seed it ran there: IQM [95% CI] (stratified by experiment). "
-        "Methods run on different sets of experiments are not strictly comparable; the count says which.",
+        "Methods run on different sets of experiments are not strictly comparable; the count says which. "
+        "A mapping variant's rows that are its parent's records (its methods without a source) count once.",
         "",
         "| method | experiments | runs | normalised final score: IQM [95% CI] |",
         "|---|---|---|---|",

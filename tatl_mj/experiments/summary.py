@@ -400,6 +400,8 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             if any(k in recs[s] for s in seeds_done)
         },
         "wall_s": [recs[s].get("wall_s") for s in seeds_done],
+        # Per seed whose record is another experiment's (a variant's method without a source).
+        "shared_from": {str(s): recs[s]["shared_from"] for s in seeds_done if "shared_from" in recs[s]},
     }
 
 
@@ -561,10 +563,18 @@ def _baselines() -> tuple[str, ...]:
 
 def aggregate(experiments: dict) -> dict:
     """Across experiments: each method's IQM of normalised final scores over every experiment
-    and seed it ran (stratified by experiment), with its interval, and its per-run scores."""
+    and seed it ran (stratified by experiment), with its interval, and its per-run scores.
+
+    A method's rows that are copies of another experiment's here (a mapping variant's methods
+    without a source: the same records) are counted once, in the experiment that computed them.
+    """
     strata: dict[str, list[np.ndarray]] = {}
     for exp in experiments.values():
         for name, data in exp["methods"].items():
+            origins = {unit.split("/")[0] for unit in data.get("shared_from", {}).values()}
+            copied = len(data.get("shared_from", {})) == len(data.get("seeds", ())) > 0
+            if copied and origins <= set(experiments):
+                continue
             if "normalised" in data:
                 strata.setdefault(name, []).append(np.asarray(data["normalised"])[:, -1])
     return {
