@@ -236,6 +236,13 @@ def _learn_mapping(
     return mappings.MAPPINGS[spec.mapping.kind](inputs)
 
 
+def _random_return(spec: ExperimentSpec, preset: Preset, seed: int) -> float:
+    """The uniformly random policy's mean return from the experiment's evaluation starts."""
+    policy = random_policy(spec.target, derive_seed(seed, "random-policy"))
+    returns, _ = target_returns(spec, preset, policy, derive_seed(seed, spec.stream_name, "evaluation"))
+    return float(np.mean(returns))
+
+
 def learn_source(
     spec: ExperimentSpec, preset: Preset, seed: int, shared: SourceArtifacts | None = None
 ) -> SourceArtifacts:
@@ -263,16 +270,7 @@ def learn_source(
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    if shared is None:
-        returns, _ = target_returns(
-            spec,
-            preset,
-            random_policy(spec.target, derive_seed(seed, "random-policy")),
-            derive_seed(seed, spec.stream_name, "evaluation"),
-        )
-        random_return = float(np.mean(returns))
-    else:
-        random_return = shared.random_return
+    random_return = _random_return(spec, preset, seed) if shared is None else shared.random_return
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
         source_q=source_q,

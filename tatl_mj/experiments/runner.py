@@ -328,20 +328,21 @@ def _experiment_key(spec: ExperimentSpec, preset: str) -> list:
     return [spec.stream_name, preset, rest]
 
 
-def _share_key(spec: ExperimentSpec, preset: str, unit: Unit, custom: dict[str, Any]) -> str | None:
+def _share_key(spec: ExperimentSpec, preset: str, unit: Unit, custom: dict[str, Any], base: list) -> str | None:
     """Equal for units whose work is shared: source units of experiments that draw the same
     streams and differ only in their mapping and methods (the source Q, target samples and
     random return are one computation; each learns its own mapping), and in those a method
     without a source (``uses_source`` False: the problem withholds the source Q, mapping and
-    source simulator), whose record is the same but its ``experiment``; None for any other."""
+    source simulator), whose record is the same but its ``experiment``; None for any other.
+    ``base``: the experiment's :func:`_experiment_key`."""
     if unit.name == SOURCE_UNIT:
-        return json.dumps([*_experiment_key(spec, preset), unit.seed], sort_keys=True, default=repr)
+        return json.dumps([*base, unit.seed], sort_keys=True, default=repr)
     if unit.name in custom:
         return None
     transfer = pipeline.methods_from_spec(spec, spec.preset(preset), [unit.name])[unit.name]
     if contract(transfer).uses_source:
         return None
-    parts = [*_experiment_key(spec, preset), unit.seed, unit.name, spec.methods.get(unit.name), repr(transfer)]
+    parts = [*base, unit.seed, unit.name, spec.methods.get(unit.name), repr(transfer)]
     return json.dumps(parts, sort_keys=True, default=repr)
 
 
@@ -349,9 +350,10 @@ def _shared(
     specs: dict[str, ExperimentSpec], preset: str, units: list[Unit], custom: dict[str, Any]
 ) -> list[list[Unit]]:
     """The groups (two or more) of units that share work (:func:`_share_key`), in run order."""
+    bases = {name: _experiment_key(spec, preset) for name, spec in specs.items()}
     groups: dict[str, list[Unit]] = {}
     for unit in units:
-        key = _share_key(specs[unit.experiment], preset, unit, custom)
+        key = _share_key(specs[unit.experiment], preset, unit, custom, bases[unit.experiment])
         if key is not None:
             groups.setdefault(key, []).append(unit)
     return [group for group in groups.values() if len(group) > 1]

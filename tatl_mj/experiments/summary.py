@@ -571,9 +571,9 @@ def aggregate(experiments: dict) -> dict:
     strata: dict[str, list[np.ndarray]] = {}
     for exp in experiments.values():
         for name, data in exp["methods"].items():
-            origins = {unit.split("/")[0] for unit in data.get("shared_from", {}).values()}
-            copied = len(data.get("shared_from", {})) == len(data.get("seeds", ())) > 0
-            if copied and origins <= set(experiments):
+            shared = data.get("shared_from", {})
+            origins = {unit.split("/")[0] for unit in shared.values()}
+            if len(shared) == len(data.get("seeds", ())) > 0 and origins <= set(experiments):
                 continue
             if "normalised" in data:
                 strata.setdefault(name, []).append(np.asarray(data["normalised"])[:, -1])
