@@ -320,3 +320,14 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
     assert [curve[0][k] for k in ("returns", "steps")] == [curve[2][k] for k in ("returns", "steps")]
     assert curve[0]["returns"] == alone[0]["returns"] and curve[1]["returns"] != curve[0]["returns"]
     assert curve[2]["evaluate_s"] == 0.0 < curve[0]["evaluate_s"] and curve[2]["samples"] == 200
+
+
+def test_target_learners_take_a_precision_for_the_linear_regressor_only():
+    assert RL(precision="single").regressor_spec()["precision"] == "single"
+    assert "precision" not in RL().regressor_spec()  # double, the regressor's default
+    with pytest.raises(ValueError, match=r"RL\.precision is 'half'; valid choices: \['double', 'single'\]"):
+        RL(precision="half")
+    with pytest.raises(ValueError, match=r"RL\.precision applies to regressor 'linear' only"):
+        RL(regressor="extra_trees", precision="single")
+    # A spec's method table reaches the learner through the registry, as ridge does.
+    assert registry.build("rl", {"precision": "single", "ridge": 1.0}).precision == "single"

@@ -19,7 +19,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.fqi import REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
+from tatl_mj.transfer.fqi import PRECISIONS, REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
 from tatl_mj.transfer.method import Policy, TransferProblem, check_features
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transitions import Transitions
@@ -75,6 +75,8 @@ class TargetFQI:
         refused for extra-trees, which split raw states.
       regressor: ``"linear"`` or ``"extra_trees"``.
       ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
+      precision: the linear regressor's ``"double"`` (default) or ``"single"``
+        passes (see :class:`~tatl_mj.transfer.fqi.LinearRegressor`); refused for extra-trees.
       n_estimators: extra-trees' tree count (default 50); refused for linear.
       gamma, iterations: FQI's discount and iteration count.
       data: where its n target transitions come from (n: the budget):
@@ -93,6 +95,7 @@ class TargetFQI:
     features: dict | None = None
     regressor: str = "linear"
     ridge: float | None = None
+    precision: str | None = None
     n_estimators: int | None = None
     gamma: float = 0.95
     iterations: int = 20
@@ -106,7 +109,7 @@ class TargetFQI:
     def __post_init__(self) -> None:
         owner = type(self).__name__
         choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
-        for field in ("ridge", "features"):
+        for field in ("ridge", "precision", "features"):
             if getattr(self, field) is not None and self.regressor != "linear":
                 raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
         if self.n_estimators is not None:
@@ -115,6 +118,8 @@ class TargetFQI:
             integer(owner, "n_estimators", self.n_estimators, 1)
         if self.ridge is not None:
             number(owner, "ridge", self.ridge, 0.0)
+        if self.precision is not None:
+            choice(owner, "precision", self.precision, PRECISIONS)
         if self.regressor == "linear":
             check_features(owner, "features", self.linear_features)
         number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
@@ -147,6 +152,8 @@ class TargetFQI:
         spec: dict = {"kind": self.regressor, "features": self.linear_features}
         if self.regressor == "linear":
             spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
+            if self.precision is not None:
+                spec["precision"] = self.precision
         elif self.n_estimators is not None:
             spec["n_estimators"] = self.n_estimators
         return spec
