@@ -303,6 +303,36 @@ def test_deterministic_and_independent_of_threads():
     assert not np.array_equal(a.states, c.states)
 
 
+def test_mujoco_threads_sets_the_default_thread_count_and_not_the_numbers():
+    def policy(states):  # a deterministic bang-bang controller on the pole's lean
+        return np.where(states[:, 2:3] > 0, 1.0, -1.0)
+
+    assert simulator.simulator_for("cartpole", "balance", None, None).n_threads == 2
+    two = sampling.evaluate("cartpole", "balance", policy, 20, seed=5, max_episode_steps=200)
+    with sampling.mujoco_threads(1):
+        assert simulator.simulator_for("cartpole", "balance", None, None).n_threads == 1
+        assert simulator.simulator_for("cartpole", "balance", None, 2).n_threads == 2  # given: kept
+        one = sampling.evaluate("cartpole", "balance", policy, 20, seed=5, max_episode_steps=200)
+        with sampling.mujoco_threads(3):
+            assert simulator.simulator_for("cartpole", "balance", None, None).n_threads == 3
+        assert simulator.simulator_for("cartpole", "balance", None, None).n_threads == 1
+    assert simulator.simulator_for("cartpole", "balance", None, None).n_threads == 2
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+    assert len(set(two[1])) > 1  # episodes of different lengths: the lockstep bookkeeping ran
+    with pytest.raises(ValueError, match="n_threads"):
+        with sampling.mujoco_threads(0):
+            pass
+
+
+def test_a_unit_steps_mujoco_on_one_thread():
+    from tatl_mj.experiments import pipeline
+
+    with pipeline.one_thread():
+        assert simulator.simulator_for("pendulum", "swingup", None, None).n_threads == 1
+    assert simulator.simulator_for("pendulum", "swingup", None, None).n_threads == 2
+
+
 def test_a_policy_that_collects_does_not_disturb_the_collection():
     # collect() and evaluate() reuse one environment per task, reseeded; a policy that
     # itself collects or evaluates on the same task must get its own.

@@ -21,12 +21,13 @@ comparison because TA-TL and UMA-TL share them.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 import warnings
 import zlib
 from functools import partial
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import threadpoolctl
@@ -41,11 +42,17 @@ from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
 
 
-def one_thread() -> threadpoolctl.threadpool_limits:
-    """One BLAS/OpenMP thread, for a unit's whole work (and a clip's training), as Ray runs a
-    one-CPU task: a record must not depend on the executor or the machine's core count (a
-    sum's last bit can flip with the thread count, and chaotic targets amplify it)."""
-    return threadpoolctl.threadpool_limits(limits=1)
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """One thread, for a unit's whole work (and a clip's training), as Ray runs a one-CPU task.
+
+    One BLAS/OpenMP thread: a record must not depend on the executor or the machine's
+    core count (a sum's last bit can flip with the thread count, and chaotic targets
+    amplify it). One MuJoCo thread: the numbers would be the same on more, but a run's
+    units already fill the cores, and their thread pools would wait on each other.
+    """
+    with threadpoolctl.threadpool_limits(limits=1), sampling.mujoco_threads(1):
+        yield
 
 
 def derive_seed(seed: int, *names: str) -> int:

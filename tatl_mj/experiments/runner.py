@@ -11,9 +11,9 @@ the same command resumes where it stopped. A failing unit is reported
 other unit has finished and the summary is written, :func:`run` raises
 :class:`RunFailed`, so a run with a failed unit never looks like a success.
 
-Every unit computes on one BLAS/OpenMP thread (:func:`pipeline.one_thread`), as
-a one-CPU Ray task does, so its record depends neither on the executor nor on
-the machine's core count.
+Every unit computes on one BLAS/OpenMP thread and one MuJoCo thread
+(:func:`pipeline.one_thread`), as a one-CPU Ray task does, so its record depends
+neither on the executor nor on the machine's core count.
 """
 
 from __future__ import annotations

@@ -14,7 +14,8 @@ stepping the dm_control environment.
   or several policies' in one lockstep batch (:mod:`.evaluation`).
 - :func:`step_from`, :func:`step_values_from`: one-step queries (:mod:`.queries`).
 - :func:`is_batched`, :func:`physics_substeps`: which path a task takes, and
-  the MuJoCo substeps taken so far.
+  the MuJoCo substeps taken so far; :func:`mujoco_threads`: how many threads
+  the calls not given ``n_threads`` step on.
 
 Seeding: ``collect``/``evaluate`` with ``seed`` draw start states from the
 successive resets of the task created with ``task_kwargs["random"] = seed``.
@@ -31,7 +32,7 @@ from tatl_mj.sampling.collection import collect, policy_transitions
 from tatl_mj.sampling.evaluation import Joint, evaluate, evaluate_policies, one_by_one, start_states
 from tatl_mj.sampling.queries import step_from, step_values_from
 from tatl_mj.sampling.schedule import DEFAULT_PARALLEL
-from tatl_mj.sampling.simulator import is_batched, physics_substeps
+from tatl_mj.sampling.simulator import is_batched, mujoco_threads, physics_substeps
 
 __all__ = [
     "DEFAULT_PARALLEL",
@@ -42,6 +43,7 @@ __all__ = [
     "evaluate_policies",
     "Joint",
     "is_batched",
+    "mujoco_threads",
     "one_by_one",
     "physics_substeps",
     "policy_transitions",

@@ -46,7 +46,7 @@ def collect(
     policy: IndexPolicy | None = None,
     task_kwargs: dict[str, Any] | None = None,
     max_episode_steps: int | None = None,
-    n_threads: int = 2,
+    n_threads: int | None = None,
     n_parallel: int | None = None,
 ) -> Transitions:
     """Exactly ``n_transitions`` transitions of whole episodes, in episode order.

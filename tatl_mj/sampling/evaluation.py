@@ -31,7 +31,7 @@ def evaluate(
     seed: int,
     task_kwargs: dict[str, Any] | None = None,
     max_episode_steps: int | None = None,
-    n_threads: int = 2,
+    n_threads: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Undiscounted returns (n,) and lengths (n,) of ``policy`` over ``n_episodes``.
 
@@ -58,7 +58,7 @@ def evaluate_policies(
     seed: int,
     task_kwargs: dict[str, Any] | None = None,
     max_episode_steps: int | None = None,
-    n_threads: int = 2,
+    n_threads: int | None = None,
     joint: Joint | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`evaluate` of each of ``policies`` with the same ``seed``, all in one lockstep batch.

@@ -16,7 +16,7 @@ def step_from(
     states: np.ndarray,
     action_indices: np.ndarray,
     task_kwargs: dict[str, Any] | None = None,
-    n_threads: int = 2,
+    n_threads: int | None = None,
 ) -> np.ndarray:
     """Next states after one control step from each of ``states`` (N, d).
 
@@ -40,7 +40,7 @@ def step_values_from(
     states: np.ndarray,
     action_values: np.ndarray,
     task_kwargs: dict[str, Any] | None = None,
-    n_threads: int = 2,
+    n_threads: int | None = None,
 ) -> np.ndarray:
     """Like :func:`step_from`, with actuator values (N, m) instead of action indices."""
     sim = simulator_for(domain, task, task_kwargs, n_threads)

@@ -33,10 +33,11 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import contextvars
 import functools
 import inspect
 import weakref
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import dm_env
 import mujoco
@@ -51,6 +52,9 @@ from tatl_mj.validation import integer, is_integer
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
 _WARNING_NUMBER = 1  # Batch.warning is (nsim, mjNWARNING, [lastinfo, number])
 _SMALL_QUERY = 16  # step_from queries of fewer states are stepped on one thread
+
+# MuJoCo threads of the batched calls not given n_threads: mujoco_threads() sets it.
+_THREADS: contextvars.ContextVar[int] = contextvars.ContextVar("tatl_mj_mujoco_threads", default=2)
 
 # MuJoCo substeps this process has taken, by "domain/task": what a run's work is
 # measured against (raw mujoco.rollout speed over the same substeps).
@@ -347,8 +351,24 @@ def _cached(domain: str, task: str, kwargs: tuple[tuple[str, Any], ...], n_threa
     return Simulator(domain, task, kwargs, n_threads)
 
 
-def simulator_for(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int) -> Simulator:
-    n_threads = integer("", "n_threads", n_threads, 1)
+@contextlib.contextmanager
+def mujoco_threads(n: int) -> Iterator[None]:
+    """Within it, batched calls not given ``n_threads`` step on ``n`` MuJoCo threads (default 2).
+
+    Each simulation steps alone whatever the count, so the numbers are the same; a
+    run's units, each on one core, take 1, as two pools of two threads on two cores
+    wait on each other.
+    """
+    token = _THREADS.set(integer("", "n_threads", n, 1))
+    try:
+        yield
+    finally:
+        _THREADS.reset(token)
+
+
+def simulator_for(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int | None) -> Simulator:
+    """The (cached) simulator of ``domain/task``; ``n_threads`` None: :func:`mujoco_threads`'s."""
+    n_threads = _THREADS.get() if n_threads is None else integer("", "n_threads", n_threads, 1)
     key = _kwargs_key(task_kwargs)
     try:
         hash(key)
@@ -358,7 +378,7 @@ def simulator_for(domain: str, task: str, task_kwargs: dict[str, Any] | None, n_
 
 
 def episode_simulator(
-    domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int, max_episode_steps: int | None
+    domain: str, task: str, task_kwargs: dict[str, Any] | None, n_threads: int | None, max_episode_steps: int | None
 ) -> Simulator:
     """:func:`simulator_for`, for episodes that end after ``max_episode_steps`` (checked; None: the task's limit)."""
     if max_episode_steps is not None:
