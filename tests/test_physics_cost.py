@@ -32,8 +32,12 @@ def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monke
         records.write_json(path, {"wall_s": 2.0, "physics_substeps": {"pendulum/swingup": n}})
     older = run.record_path("exp", 0, "rl")
     records.write_json(older, {"wall_s": 50.0})  # no count: left out of both sides
-    timed = {"steps_per_s": 500.0, "substeps": 2}  # 1,000 substeps a second
-    monkeypatch.setattr("tatl_mj.bench.time_rollout", lambda domain, task, seconds, threads: timed)
+    # Three timings of a drifting machine: the fastest, 1,000 substeps a second, prices the run.
+    timings = iter([250.0, 500.0, 400.0])
+    monkeypatch.setattr(
+        "tatl_mj.bench.time_rollout",
+        lambda domain, task, seconds, threads: {"steps_per_s": next(timings), "substeps": 2},
+    )
     report = runner.physics_report(tmp_path)
     assert report["work_s"] == 4.0 and report["physics_s"] == pytest.approx(4.0)
     assert report["ratio"] == pytest.approx(1.0)
