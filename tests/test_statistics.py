@@ -93,3 +93,19 @@ def test_kaplan_meier_equals_the_textbook_product():
     # 2 of 5 at 3, 1 of 3 at 5.
     np.testing.assert_allclose(s, [5 / 6, 5 / 6 * 3 / 5, 5 / 6 * 3 / 5 * 2 / 3])
     assert st.survival([8, 8], cap=8)[0].size == 0  # nobody fell: no curve to draw
+
+
+def test_the_across_experiments_interval_does_not_depend_on_the_specs_order():
+    # The bootstrap resamples each experiment's seeds in stratum order; the same records given
+    # in another order (another command line, or summary.json's sorted keys) give the same interval.
+    from tatl_mj.experiments import summary
+
+    rng = np.random.default_rng(3)
+    experiments = {
+        name: {"methods": {"rl": {"seeds": list(range(10)), "normalised": np.c_[np.zeros(10), rng.normal(m, 1, 10)]}}}
+        for name, m in (("mc_to_ip", -1.0), ("bicycle", 0.5), ("grid", 1.0), ("flipped", -0.2))
+    }
+    given = summary.aggregate(experiments)["rl"]
+    reordered = summary.aggregate(dict(reversed(list(experiments.items()))))["rl"]
+    assert (given["low"], given["high"]) == (reordered["low"], reordered["high"])
+    assert given["low"] < given["value"] < given["high"]

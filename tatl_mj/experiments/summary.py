@@ -569,7 +569,9 @@ def aggregate(experiments: dict) -> dict:
     without a source: the same records) are counted once, in the experiment that computed them.
     """
     strata: dict[str, list[np.ndarray]] = {}
-    for exp in experiments.values():
+    # Strata by experiment name: the bootstrap's draws follow their order, which must not be
+    # the order the specs were given in (or the keys' order in summary.json).
+    for _, exp in sorted(experiments.items()):
         for name, data in exp["methods"].items():
             shared = data.get("shared_from", {})
             origins = {unit.split("/")[0] for unit in shared.values()}
