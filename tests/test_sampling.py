@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from tatl_mj import sampling, suite
+from tatl_mj.policy import StatePolicy
 from tatl_mj.sampling import collection, schedule, simulator
+from tatl_mj.sampling.checks import DrawingPolicy
 
 # Rider noise: collect() draws it from each episode's own blocks, the environment
 # from its task's random; with zero noise nothing is drawn and both agree.
@@ -899,6 +901,56 @@ def test_a_grid_policy_collected_on_its_table_equals_policy_transitions_in_its_e
     got = sampling.collect(*GRID, 1500, seed=11, policy=policy, task_kwargs=RANDOM_START, max_episode_steps=40)
     env = suite.load(*GRID, task_kwargs={**RANDOM_START, "random": 11})
     want = sampling.policy_transitions(env, policy, 1500, np.arange(4), max_episode_steps=40)
+    for field in FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+
+
+def _grid_epsilon_greedy(seed: int, cells: bool):
+    from tatl_mj.transfer.features import make_features
+    from tatl_mj.transfer.fqi import LinearQ
+    from tatl_mj.transfer.methods.target_fqi import EpsilonGreedy
+
+    features = make_features({"kind": "onehot", "n_rows": 10, "n_cols": 10}, 2)
+    q = LinearQ(features, np.random.default_rng(8).normal(size=(4, features.size(2))))
+    return EpsilonGreedy(q, 0.3, np.random.default_rng(seed), cells=cells)
+
+
+@pytest.mark.parametrize("cells", [False, True])
+def test_a_drawing_policy_on_the_grid_table_draws_first_and_takes_the_same_actions(monkeypatch, cells):
+    # On the table, a DrawingPolicy's draws are made for every step first and each step
+    # answered from its row; a plain call a step (the same policy behind a lambda,
+    # which is not a DrawingPolicy) must give the same transitions and leave its
+    # generator where the draws-first path leaves it.
+    drawing, reference = _grid_epsilon_greedy(5, cells), _grid_epsilon_greedy(5, cells)
+    assert isinstance(drawing, DrawingPolicy) and not isinstance(lambda s: reference(s), DrawingPolicy)
+    kwargs = dict(task_kwargs=RANDOM_START, max_episode_steps=60)
+    answered, act = [], type(drawing).act
+    monkeypatch.setattr(
+        type(drawing), "act", lambda self, states, draws: answered.append(1) or act(self, states, draws)
+    )
+    got = sampling.collect(*GRID, 2500, seed=4, policy=drawing, **kwargs)
+    assert len(answered) == 2500  # the draws-first path, a row a step
+    want = sampling.collect(*GRID, 2500, seed=4, policy=lambda s: reference(s), **kwargs)
+    for field in FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+    assert drawing.rng.bit_generator.state == reference.rng.bit_generator.state
+    explored = got.actions != _grid_epsilon_greedy(5, cells).q.greedy(got.states)
+    assert 0.1 < explored.mean() < 0.4  # epsilon 0.3, a quarter of explorations greedy by chance
+
+
+def test_a_state_policy_on_the_grid_table_is_asked_once_a_cell_for_the_same_transitions():
+    asked = []
+
+    def policy(states):
+        asked.append(tuple(states[0]))
+        return np.where(states[:, 1] < 8, 3, np.where(states[:, 0] > 4, 0, 1))
+
+    kwargs = dict(task_kwargs=RANDOM_START, max_episode_steps=40)
+    got = sampling.collect(*GRID, 3000, seed=2, policy=StatePolicy(policy), **kwargs)
+    assert len(asked) == len(set(asked)) == len(np.unique(got.states, axis=0))
+    asked.clear()
+    want = sampling.collect(*GRID, 3000, seed=2, policy=policy, **kwargs)
+    assert len(asked) == 3000  # a call a step
     for field in FIELDS:
         np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
 

@@ -27,6 +27,7 @@ control noise, a collection is exactly a plain loop over that environment with
 its actions.
 """
 
+from tatl_mj.policy import StatePolicy
 from tatl_mj.sampling.checks import IndexPolicy, ValuePolicy
 from tatl_mj.sampling.collection import collect, policy_transitions
 from tatl_mj.sampling.evaluation import Joint, evaluate, evaluate_policies, one_by_one, start_states
@@ -37,6 +38,7 @@ from tatl_mj.sampling.simulator import is_batched, mujoco_threads, physics_subst
 __all__ = [
     "DEFAULT_PARALLEL",
     "IndexPolicy",
+    "StatePolicy",
     "ValuePolicy",
     "collect",
     "evaluate",

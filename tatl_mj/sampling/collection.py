@@ -29,6 +29,7 @@ from typing import Any, Callable
 import dm_env
 import numpy as np
 
+from tatl_mj.policy import StatePolicy
 from tatl_mj.sampling import schedule
 from tatl_mj.sampling.checks import DrawingPolicy, IndexPolicy, check_indices
 from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, Table, episode_simulator, observed_state
@@ -328,9 +329,24 @@ def _collect_loop(
         # same integers in one call.
         drawn = iter(np.random.default_rng(seed).integers(n_actions, size=n).tolist())
         choose = lambda cell: next(drawn)  # noqa: E731
+    elif isinstance(policy, DrawingPolicy):
+        # Every call's draws first, then each step answered with its row: the same actions.
+        draws, rows = policy.draws(n), iter(range(n))
+
+        def choose(cell: int) -> int:
+            return _one_action(policy.act(table.states[cell : cell + 1], draws[next(rows)][None]), n_actions)
+
     else:
         by_state = _policy_choice(policy, n_actions)
-        choose = lambda cell: by_state(table.states[cell].copy())  # noqa: E731
+        memo: dict[int, int] | None = {} if isinstance(policy, StatePolicy) else None
+
+        def choose(cell: int) -> int:
+            if memo is None:
+                return by_state(table.states[cell].copy())
+            if cell not in memo:  # a function of the state alone: its first answer in a cell stands
+                memo[cell] = by_state(table.states[cell].copy())
+            return memo[cell]
+
     return _environment_loop(*_table_stepping(env, table), choose, n, table.episode_limit(max_episode_steps))
 
 

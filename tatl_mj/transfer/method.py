@@ -25,6 +25,7 @@ from typing import Any, Callable, NoReturn, Protocol, runtime_checkable
 import numpy as np
 
 from tatl_mj.description import TaskDescription
+from tatl_mj.policy import StatePolicy
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import make_features
 from tatl_mj.transfer.fqi import QFunction
@@ -127,8 +128,10 @@ class TransferProblem:
             index = source_q.greedy(mapping.chi_plus(states))
             return index if target.discrete else target.action_values[index]
 
-        object.__setattr__(self, "_projected_source_policy", policy)  # frozen: a cache, not a field
-        return policy
+        # A function of the state alone: a tabular target's sampler asks it once per cell.
+        projected = StatePolicy(policy)
+        object.__setattr__(self, "_projected_source_policy", projected)  # frozen: a cache, not a field
+        return projected
 
     @property
     def has_utility_gap(self) -> bool:

@@ -274,7 +274,7 @@ class EpsilonGreedy:
 
     def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """(N,) what one-state calls on each row of ``states`` return, the row having drawn ``draws``' row."""
-        greedy = greedy_each(self.q, states)
+        greedy = self.greedy(states) if self.cells and len(states) == 1 else greedy_each(self.q, states)
         return np.where(draws[:, 0] < self.epsilon, draws[:, 1].astype(np.int64), greedy)
 
 
