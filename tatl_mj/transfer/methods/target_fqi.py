@@ -265,12 +265,9 @@ class EpsilonGreedy:
     def draws(self, calls: int) -> np.ndarray:
         """(calls, 2): what ``calls`` successive one-state calls draw, in their order
         (the uniform number, the random action), drawn now."""
-        out = np.empty((calls, 2))
+        # A scalar draw takes what a one-element draw takes from the generator (tested).
         random, integers, n = self.rng.random, self.rng.integers, self.q.n_actions
-        for i in range(calls):
-            out[i, 0] = random(1)[0]
-            out[i, 1] = integers(n, size=1)[0]
-        return out
+        return np.array([(random(), integers(n)) for _ in range(calls)], np.float64).reshape(calls, 2)
 
     def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """(N,) what one-state calls on each row of ``states`` return, the row having drawn ``draws``' row."""
