@@ -614,8 +614,8 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
     for key, n in sorted(substeps.items()):
         domain, task = key.split("/", 1)
         # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
-        timings = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
-        timed = max(timings, key=lambda t: t["steps_per_s"])
+        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
+        timed = max(tries, key=lambda t: t["steps_per_s"])
         rate = timed["steps_per_s"] * timed["substeps"]
         by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
     physics_s = sum(v["raw_s"] for v in by_task.values())

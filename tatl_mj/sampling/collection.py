@@ -23,6 +23,7 @@ be made first (:func:`_collect_scheduled`): the same transitions.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from typing import Any, Callable
 
@@ -338,14 +339,12 @@ def _collect_loop(
 
     else:
         by_state = _policy_choice(policy, n_actions)
-        memo: dict[int, int] | None = {} if isinstance(policy, StatePolicy) else None
 
         def choose(cell: int) -> int:
-            if memo is None:
-                return by_state(table.states[cell].copy())
-            if cell not in memo:  # a function of the state alone: its first answer in a cell stands
-                memo[cell] = by_state(table.states[cell].copy())
-            return memo[cell]
+            return by_state(table.states[cell].copy())
+
+        if isinstance(policy, StatePolicy):  # a function of the state alone: its first answer in a cell stands
+            choose = functools.cache(choose)
 
     return _environment_loop(*_table_stepping(env, table), choose, n, table.episode_limit(max_episode_steps))
 
