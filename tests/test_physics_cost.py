@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import tiny_spec
 
 from tatl_mj import sampling, suite
 from tatl_mj.experiments import records, runner
@@ -44,3 +45,38 @@ def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monke
     assert report["by_task"]["pendulum/swingup"]["substeps"] == 4000
     assert report["records_without_counts"] == 1
     assert "work / physics = 1.0x (1 older records without counts left out of both)" in runner.format_physics(report)
+
+
+def test_a_unit_records_the_seconds_of_its_fqi_fits(tmp_path):
+    spec = tiny_spec()
+    result = runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl", "projected-source"])
+    assert result["failures"] == []
+    run = records.RunDirectory(tmp_path)
+    source, rl, projected = (
+        records.read_json(run.record_path(spec.name, 0, name)) for name in ("source", "rl", "projected-source")
+    )
+    # The source is learned by FQI and rl fits one per budget; the projected policy fits nothing.
+    assert 0.0 < source["fqi_s"] <= source["wall_s"]
+    assert 0.0 < rl["fqi_s"] <= sum(point["learn_s"] for point in rl["curve"])
+    assert projected["fqi_s"] == 0.0
+
+
+def test_the_physics_report_adds_the_fits_to_the_physics_where_every_record_times_them(tmp_path, monkeypatch):
+    run = records.RunDirectory(tmp_path)
+    for name, fits in (("rl", 3.0), ("ta-tl", 0.5)):
+        path = run.record_path("exp", 0, name)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        records.write_json(path, {"wall_s": 5.0, "fqi_s": fits, "physics_substeps": {"pendulum/swingup": 1000}})
+    monkeypatch.setattr(
+        "tatl_mj.bench.time_rollout", lambda domain, task, seconds, threads: {"steps_per_s": 500.0, "substeps": 2}
+    )
+    report = runner.physics_report(tmp_path)
+    assert report["fqi_s"] == 3.5 and report["floor_s"] == pytest.approx(5.5)
+    assert runner.format_physics(report).splitlines()[1] == (
+        "FQI's fits: 3.5 s of the work; physics at raw speed + FQI's fits = 5.5 s; everything else 4.5 s"
+    )
+    # A record written before fits were timed: no floor, rather than a floor too low.
+    records.write_json(run.record_path("exp", 0, "uma-tl"), {"wall_s": 1.0, "physics_substeps": {}})
+    report = runner.physics_report(tmp_path)
+    assert report["fqi_s"] is None and report["floor_s"] is None
+    assert len(runner.format_physics(report).splitlines()) == 1

@@ -12,7 +12,7 @@ from tatl_mj.experiments.spec import MappingSpec
 from tatl_mj.transfer import method, registry
 
 # Timings and the marks of a shared copy: everything else of a record is its result.
-COSTS = {"wall_s", "physics_substeps", "shared_from"}
+COSTS = {"wall_s", "fqi_s", "physics_substeps", "shared_from"}
 
 
 def _result(record: dict) -> dict:
@@ -62,7 +62,7 @@ def test_shared_units_run_once_and_equal_the_variant_run_alone(tmp_path):
     copy = records.read_json(pair.record_path(variant.name, 0, "rl"))
     origin = records.read_json(pair.record_path(parent.name, 0, "rl"))
     assert copy["shared_from"] == "ip_to_flipped_ip/seed0/rl" and "shared_from" not in origin
-    assert copy["wall_s"] == 0.0 and copy["physics_substeps"] == {} and origin["wall_s"] > 0
+    assert copy["wall_s"] == copy["fqi_s"] == 0.0 and copy["physics_substeps"] == {} and origin["wall_s"] > 0
     assert all(p["learn_s"] == p["evaluate_s"] == 0.0 for p in copy["curve"])
     assert both["experiments"][variant.name]["methods"]["rl"]["shared_from"] == {"0": "ip_to_flipped_ip/seed0/rl"}
     assert both["experiments"][variant.name]["methods"]["ta-tl"]["shared_from"] == {}

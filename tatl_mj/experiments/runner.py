@@ -40,7 +40,7 @@ from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
-from tatl_mj.transfer import registry
+from tatl_mj.transfer import fqi, registry
 from tatl_mj.transfer.method import TransferMethod, contract
 
 EXECUTORS = ("local", "ray")
@@ -111,7 +111,7 @@ def _work(
 ) -> dict:
     """:func:`work`'s unit, which may raise."""
     preset = spec.preset(preset_name)
-    substeps = sampling.physics_substeps()
+    substeps, fits = sampling.physics_substeps(), fqi.fqi_seconds()
     if unit.name == SOURCE_UNIT:
         # source_blob here: the artefacts of an experiment that differs only in its mapping.
         shared = pickle.loads(source_blob) if source_blob is not None else None
@@ -132,6 +132,7 @@ def _work(
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
     record["wall_s"] = time.perf_counter() - start
+    record["fqi_s"] = fqi.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
     # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
     record["physics_substeps"] = {
         key: n - substeps.get(key, 0) for key, n in sampling.physics_substeps().items() if n > substeps.get(key, 0)
@@ -361,7 +362,7 @@ def _shared(
 
 def shared_record(record: dict, unit: Unit, origin: Unit) -> dict:
     """``origin``'s record as ``unit``'s: the same curve, marked as shared, with none of the
-    work (its wall time, substeps and phase timings are the origin's alone)."""
+    work (its wall time, FQI time, substeps and phase timings are the origin's alone)."""
     curve = [{**point, "learn_s": 0.0, "evaluate_s": 0.0} for point in record["curve"]]
     first = record.get("shared_from", str(origin))
     if first == str(unit):  # its own record was lost and comes back from a copy of it
@@ -372,6 +373,7 @@ def shared_record(record: dict, unit: Unit, origin: Unit) -> dict:
         "curve": curve,
         "shared_from": first,
         "wall_s": 0.0,
+        "fqi_s": 0.0,
         "physics_substeps": {},
     }
 
@@ -594,11 +596,15 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
     """A run's work against its physics: the summed unit wall times (``work_s``), and the
     MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
     (``physics_s``: per task, the fastest of ``repeats`` timings of ``seconds`` each, taken
-    now), and their ratio. Records without a substep count (older ones) are left out of both."""
+    now), and their ratio. Records without a substep count (older ones) are left out of both.
+
+    ``fqi_s`` is the part of the work spent in FQI's fits, and ``floor_s`` the physics and
+    those fits together: all but the rest of the work, which is what code that keeps
+    the fits can save (both None when some counted records do not time their fits)."""
     from tatl_mj import bench
 
     substeps: dict[str, int] = {}
-    work_s, uncounted = 0.0, 0
+    work_s, fqi_s, uncounted, untimed = 0.0, 0.0, 0, 0
     for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
         try:
             record = read_json(path)
@@ -608,6 +614,10 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
             uncounted += 1  # written before substeps were counted: neither side counts it
             continue
         work_s += float(record.get("wall_s", 0.0))
+        if "fqi_s" in record:
+            fqi_s += float(record["fqi_s"])
+        else:
+            untimed += 1
         for key, n in record["physics_substeps"].items():
             substeps[key] = substeps.get(key, 0) + int(n)
     by_task = {}
@@ -623,22 +633,31 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
         "work_s": work_s,
         "physics_s": physics_s,
         "ratio": work_s / physics_s if physics_s else None,
+        "fqi_s": None if untimed else fqi_s,
+        "floor_s": None if untimed else physics_s + fqi_s,
         "by_task": by_task,
         "records_without_counts": uncounted,
     }
 
 
 def format_physics(report: dict[str, Any]) -> str:
-    """One line: work, physics at raw speed, and their ratio."""
+    """Work, physics at raw speed and their ratio; then, where every record times them,
+    FQI's fits and the floor they make with the physics."""
     if not report["physics_s"]:
         return f"work: {report['work_s']:.1f} s; no MuJoCo substeps recorded (tasks without physics, or older records)"
     substeps = sum(v["substeps"] for v in report["by_task"].values())
     left_out = report.get("records_without_counts", 0)
     note = f" ({left_out} older records without counts left out of both)" if left_out else ""
-    return (
+    line = (
         f"work: {report['work_s']:.1f} s over the records; physics: {substeps:,} MuJoCo substeps = "
         f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); "
         f"work / physics = {report['ratio']:.1f}x{note}"
+    )
+    if report.get("floor_s") is None:
+        return line
+    return (
+        f"{line}\nFQI's fits: {report['fqi_s']:.1f} s of the work; physics at raw speed + FQI's fits = "
+        f"{report['floor_s']:.1f} s; everything else {report['work_s'] - report['floor_s']:.1f} s"
     )
 
 

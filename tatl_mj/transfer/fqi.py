@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -242,6 +243,15 @@ def greedy_each(q: QFunction, states: np.ndarray) -> np.ndarray:
 
 # --- FQI ----------------------------------------------------------------------
 
+# Seconds this process has spent in fitted_q_iteration: with the physics, what a run's
+# work cannot come below without changing its fits (a run reports both).
+_FIT_SECONDS = [0.0]
+
+
+def fqi_seconds() -> float:
+    """Seconds this process has spent in :func:`fitted_q_iteration` so far."""
+    return _FIT_SECONDS[0]
+
 
 def _check_fqi_inputs(
     transitions: Transitions, n_actions: int, gamma: float, iterations: int, initial_q: QFunction | None
@@ -278,6 +288,23 @@ def fitted_q_iteration(
     ``prior_q`` (not with ``initial_q``) makes every iterate ``prior_q + residual``,
     the regressor fitting ``y - prior_q(s, a)``; Q_0 is then ``prior_q`` itself.
     """
+    start = time.perf_counter()
+    try:
+        return _fitted_q_iteration(transitions, n_actions, regressor, gamma, iterations, initial_q, rng, prior_q)
+    finally:
+        _FIT_SECONDS[0] += time.perf_counter() - start
+
+
+def _fitted_q_iteration(
+    transitions: Transitions,
+    n_actions: int,
+    regressor: Regressor,
+    gamma: float,
+    iterations: int,
+    initial_q: QFunction | None,
+    rng: np.random.Generator | None,
+    prior_q: QFunction | None,
+) -> QFunction:
     _check_fqi_inputs(transitions, n_actions, gamma, iterations, initial_q)
     if prior_q is not None:
         if initial_q is not None:
