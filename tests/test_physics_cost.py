@@ -75,6 +75,13 @@ def test_the_physics_report_adds_the_fits_to_the_physics_where_every_record_time
     assert runner.format_physics(report).splitlines()[1] == (
         "FQI's fits: 3.5 s of the work; physics at raw speed + FQI's fits = 5.5 s; everything else 4.5 s"
     )
+    # Timed on a machine that slowed after the run, the physics can cost more than the work left for it.
+    slow = {**report, "physics_s": 8.0, "floor_s": 11.5}
+    assert (
+        runner.format_physics(slow)
+        .splitlines()[1]
+        .endswith("everything else -1.5 s (below 0: MuJoCo ran slower when timed than during the run)")
+    )
     # A record written before fits were timed: no floor, rather than a floor too low.
     records.write_json(run.record_path("exp", 0, "uma-tl"), {"wall_s": 1.0, "physics_substeps": {}})
     report = runner.physics_report(tmp_path)
