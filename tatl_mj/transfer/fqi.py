@@ -27,9 +27,10 @@ Two regressors are provided:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable, ParamSpec, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 import scipy.linalg
@@ -40,6 +41,9 @@ from sklearn import ensemble
 from tatl_mj.transfer.features import Features, OneHot, as_states, make_features
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import choice, integer
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 
 @runtime_checkable
@@ -243,14 +247,28 @@ def greedy_each(q: QFunction, states: np.ndarray) -> np.ndarray:
 
 # --- FQI ----------------------------------------------------------------------
 
-# Seconds this process has spent in fitted_q_iteration: with the physics, what a run's
-# work cannot come below without changing its fits (a run reports both).
+# Seconds this process has spent in fitted_q_iteration: with the physics, the part of a
+# run's work that code keeping every fit cannot save (a run reports both).
 _FIT_SECONDS = [0.0]
 
 
 def fqi_seconds() -> float:
     """Seconds this process has spent in :func:`fitted_q_iteration` so far."""
     return _FIT_SECONDS[0]
+
+
+def _timed(fit: Callable[_P, _R]) -> Callable[_P, _R]:
+    """``fit``, its seconds added to :func:`fqi_seconds`."""
+
+    @functools.wraps(fit)
+    def timed(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        start = time.perf_counter()
+        try:
+            return fit(*args, **kwargs)
+        finally:
+            _FIT_SECONDS[0] += time.perf_counter() - start
+
+    return timed
 
 
 def _check_fqi_inputs(
@@ -271,6 +289,7 @@ def _check_fqi_inputs(
         raise ValueError(f"initial_q has {initial_q.n_actions} actions, expected n_actions={n_actions}")
 
 
+@_timed
 def fitted_q_iteration(
     transitions: Transitions,
     n_actions: int,
@@ -288,23 +307,6 @@ def fitted_q_iteration(
     ``prior_q`` (not with ``initial_q``) makes every iterate ``prior_q + residual``,
     the regressor fitting ``y - prior_q(s, a)``; Q_0 is then ``prior_q`` itself.
     """
-    start = time.perf_counter()
-    try:
-        return _fitted_q_iteration(transitions, n_actions, regressor, gamma, iterations, initial_q, rng, prior_q)
-    finally:
-        _FIT_SECONDS[0] += time.perf_counter() - start
-
-
-def _fitted_q_iteration(
-    transitions: Transitions,
-    n_actions: int,
-    regressor: Regressor,
-    gamma: float,
-    iterations: int,
-    initial_q: QFunction | None,
-    rng: np.random.Generator | None,
-    prior_q: QFunction | None,
-) -> QFunction:
     _check_fqi_inputs(transitions, n_actions, gamma, iterations, initial_q)
     if prior_q is not None:
         if initial_q is not None:
