@@ -154,3 +154,89 @@ def test_learn_apprentice_passes_the_periodic_mask_and_checks_it():
         learn_apprentice(t, action_set, ANGLE_FEATURES, gap, zeta=1e-6, batch=500, periodic=[True])
     with pytest.raises(ValueError, match="Apprentice.periodic"):
         Apprentice(np.zeros((2, 3)), np.ones((2, 1)), LinearFeatures(), periodic=(True, False, False))
+
+
+# --- Algorithm 2's rollouts side by side ------------------------------------------------
+
+
+def _pendulum_like_models(rng, n_models):
+    """Apprentices of the wrapped system fitted on growing heads (one shared periodic basis,
+    as Algorithm 2's candidates), one on another basis, and one that overflows at once."""
+    w_true, b_true, s, a, s_next = _wrapped_system(rng, 600, noise=0.05)
+    models = [fit_apprentice(s[:n], a[:n], s_next[:n], ANGLE_FEATURES, periodic=(True, False)) for n in
+              np.linspace(60, 600, n_models).astype(int)]  # fmt: skip
+    other = fit_apprentice(s, a, s_next, LinearFeatures(periodic=(True, False)), periodic=(True, False))
+    diverging = Apprentice(other.W, np.full((2, 1), 1e308), other.features, periodic=(True, False))  # 2e308: inf
+    return models, diverging, other
+
+
+def _ending_reward(states, action, next_states):
+    """Scored by the next state; an episode ends once |omega| passes 1.5 (absorbing)."""
+    return -np.sum(next_states**2, axis=1), np.abs(next_states[:, 1]) > 1.5
+
+
+def test_model_returns_give_each_model_what_model_return_gives_it_alone():
+    """Eight candidate apprentices, a diverging one and one on another basis, rolled out side
+    by side: each value is bit for bit model_return's (NaN for the diverging one), though
+    episodes end at different steps in different models."""
+    from tatl_mj.transfer.apprentice import model_return, model_returns
+
+    rng = np.random.default_rng(7)
+    models, diverging, other = _pendulum_like_models(rng, 8)
+    settings = dict(
+        starts=np.column_stack([rng.uniform(-np.pi, np.pi, 6), rng.uniform(-1, 1, 6)]),
+        reward=_ending_reward,
+        action_values=np.array([[-2.0], [0.0], [2.0]]),
+        steps=40,
+    )
+
+    def policy(states):  # push omega towards 0
+        return np.where(states[:, 1] > 0.2, 0, np.where(states[:, 1] < -0.2, 2, 1))
+
+    alone = [model_return(m, policy, **settings) for m in [*models, diverging, other]]
+    together = model_returns([*models, diverging, other], policy, **settings)
+    shared = model_returns(models, policy, **settings)  # one basis: the stacked products
+    assert np.isnan(alone[8]) and np.isnan(together[8])
+    assert all(np.isfinite(alone[:8])) and len(set(alone[:8])) > 1
+    assert together[:8] == alone[:8] and together[9] == alone[9] and shared == alone[:8]
+
+
+def test_algorithm_2_with_sizes_rolled_out_ahead_and_gaps_kept_finds_the_same_apprentice():
+    """The scan with utility_gaps (sizes ahead of need, 1, 2, 4, ... at a time) and with the
+    gaps of a smaller budget kept returns the apprentice and sample count of the plain scan,
+    bit for bit, with fewer calls."""
+    rng = np.random.default_rng(2)
+    w_true, b_true, s, a, _ = _system(-1.0, rng, 3000, noise=0.05)
+    action_set = rng.uniform(-2, 2, size=(5, 2))
+    idx = rng.integers(5, size=3000)
+    s_next = FEATURES(s) @ w_true.T + action_set[idx] @ b_true.T + 0.05 * rng.normal(size=(3000, 2))
+    t = Transitions(s, idx, np.zeros(3000), s_next, np.zeros(3000, bool), np.zeros(3000, bool))
+    calls = []
+
+    def gap(app):
+        calls.append(1)
+        return float(np.abs(app.B - b_true).max())
+
+    def gaps_of(apps):
+        calls.append(len(apps))
+        return [float(np.abs(app.B - b_true).max()) for app in apps]
+
+    for zeta in (0.004, 0.0):  # met after some batches; never met
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            calls.clear()
+            plain, plain_n = learn_apprentice(t, action_set, FEATURES, gap, zeta=zeta, batch=100)
+            n_plain = len(calls)
+            calls.clear()
+            ahead, ahead_n = learn_apprentice(t, action_set, FEATURES, gap, zeta=zeta, batch=100, utility_gaps=gaps_of)
+            n_ahead = len(calls)
+            known: dict[int, float] = {}
+            learn_apprentice(t.head(1000), action_set, FEATURES, gap, zeta=zeta, batch=100, gaps=known)
+            calls.clear()
+            kept, kept_n = learn_apprentice(t, action_set, FEATURES, gap, zeta=zeta, batch=100, gaps=known)
+        assert plain_n == ahead_n == kept_n and (plain_n < 3000) == (zeta > 0)
+        for app in (ahead, kept):
+            assert np.array_equal(app.W, plain.W) and np.array_equal(app.B, plain.B)
+        assert n_ahead <= 1 + np.log2(n_plain + 1)  # one call per doubling chunk
+        assert len(calls) == n_plain - min(n_plain, 10)  # the sizes up to 1,000 samples were known
+        assert set(known) >= set(range(100, min(plain_n, 1000) + 1, 100))

@@ -225,3 +225,37 @@ def test_the_method_contract_fills_in_its_defaults_and_reads_what_a_method_decla
     assert method_mod.contract(build("ta-tl-x", {"method": "ta-tl", "source": "placebo"})).source == "placebo"
     assert method_mod.samples_used(lambda s: s, 300) == 300
     assert method_mod.samples_used(types.SimpleNamespace(samples_used=120), 300) == 120
+
+
+def test_tatl_keeps_algorithm_2s_gaps_for_a_later_budget_and_still_counts_u_m():
+    """Budgets 200 then 400 of one stream, batch 50: the larger budget rolls out only its new
+    sizes (250-400) and learns the apprentice a fresh problem learns; where every gap is known
+    (met at 50 samples) it rolls out none, yet asks U_M, which the runner counts per budget."""
+    u_hats, u_trues = [], []
+
+    def model_return(apprentice, policy):
+        u_hats.append(1)
+        return -11.0 - float(np.abs(apprentice.B).sum())  # never within zeta = 0.1 of U_M
+
+    def target_return(policy):
+        u_trues.append(1)
+        return -10.0
+
+    method, stream = TATL(zeta=0.1, batch=50), _samples()
+    problem = _problem(target_return=target_return, model_return=model_return)
+    with pytest.warns(RuntimeWarning, match="not met"):
+        method.learn(problem, stream.head(200))
+    assert len(u_hats) == 4
+    u_hats.clear(), u_trues.clear()
+    with pytest.warns(RuntimeWarning, match="not met"):
+        kept = method.learn(problem, stream.head(400))
+    assert len(u_hats) == 4 and len(u_trues) >= 1
+    with pytest.warns(RuntimeWarning, match="not met"):
+        fresh = method.learn(_problem(target_return=target_return, model_return=model_return), stream.head(400))
+    assert kept.samples_used == fresh.samples_used == 400
+    assert np.array_equal(kept.apprentice.B, fresh.apprentice.B)
+    assert np.array_equal(kept.apprentice.W, fresh.apprentice.W)
+    met = _problem(target_return=target_return, model_return=lambda apprentice, policy: -9.0)
+    method.learn(met, stream.head(200))
+    u_trues.clear()
+    assert method.learn(met, stream.head(400)).samples_used == 50 and len(u_trues) == 1

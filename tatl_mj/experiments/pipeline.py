@@ -424,8 +424,11 @@ def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
     return derive_seed(seed, spec.stream_name, "algorithm2-starts")
 
 
-def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None) -> Callable | None:
-    """U_Mhat(pi) as a hook (``apprentice.model_return``), or None where the task has no reward.
+def _model_returns(
+    spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None
+) -> tuple[Callable, Callable] | tuple[None, None]:
+    """U_Mhat(pi) as hooks: ``apprentice.model_return`` and ``model_returns`` (several
+    models at once), or None where the task has no reward.
 
     The target task's own reward and end conditions (``_target_reward``) score the
     model's predicted states, from the start states of the real rollouts of U_M
@@ -433,20 +436,20 @@ def _model_return(spec: ExperimentSpec, preset: Preset, seed: int, reward: Calla
     such reward gets None: Algorithm 2 then cannot run there.
     """
     if reward is None:
-        return None
+        return None, None
     target = spec.target
     description = description_of(target)
     starts = sampling.start_states(
         target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
     )
-    return partial(
-        apprentice.model_return,
+    settings = dict(
         starts=starts,
         reward=reward,
         action_values=description.action_values,
         steps=preset.evaluation_steps,
         snap=apprentice.state_snap(description),
     )
+    return partial(apprentice.model_return, **settings), partial(apprentice.model_returns, **settings)
 
 
 class Ledger:
@@ -552,6 +555,7 @@ def transfer_problem(
     policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))
     reset_samples = _reset_samples(spec, seed, max(preset.target_budgets), reward)
     episode_samples = _episode_samples(spec, seed)
+    model_return, model_returns = _model_returns(spec, preset, seed, reward)
     source_q = artifacts.source_q
     if placebo:
         source_q = placebo_q(source_q, derive_seed(seed, spec.stream_name, "placebo"))
@@ -568,7 +572,8 @@ def transfer_problem(
         target=target,
         seed=derive_seed(seed, spec.stream_name, "target-learning"),
         target_return=target_return,
-        model_return=_model_return(spec, preset, seed, reward),
+        model_return=model_return,
+        model_returns=model_returns,
         target_step=partial(_target_step, spec.target, target),
         policy_samples=lambda policy, n: ledger.data(policy_samples(policy, n)),
         target_reward=reward,

@@ -203,6 +203,8 @@ def learn_apprentice(
     batch: int,
     ridge: float = 0.0,
     periodic: Sequence[bool] | None = None,
+    gaps: dict[int, float] | None = None,
+    utility_gaps: Callable[[list[Apprentice]], Sequence[float]] | None = None,
 ) -> tuple[Apprentice, int]:
     """Algorithm 2: fit on the first n = batch, 2 batch, ... samples until the gap <= zeta.
 
@@ -213,6 +215,15 @@ def learn_apprentice(
     full-rank fit are skipped. If the rule is never met, the fit on all samples is
     returned with ``n_used = len(transitions)`` and a RuntimeWarning. ``periodic``
     marks angle coordinates, as in :func:`fit_apprentice`.
+
+    ``utility_gaps(apprentices)``, if given, returns each one's ``utility_gap``
+    in one call (one rollout of them side by side): the scan then fits the next
+    sizes ahead of need, 1, 2, 4, ... at a time, and finds their gaps together.
+    ``gaps`` maps head sizes n to the gaps already found for the first n of these
+    very transitions with this ``utility_gap`` (at a smaller budget of the same
+    stream); it is read and filled in. A head whose gap is known is not rolled
+    out again, nor refitted if it missed zeta, unless it is the last. Either
+    way the result is the same.
     """
     if not isinstance(transitions, Transitions):
         raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
@@ -230,16 +241,46 @@ def learn_apprentice(
         raise ValueError("transitions is empty; the apprentice needs samples")
     periodic = periodic_mask(periodic, transitions.states.shape[1])  # bad masks fail here, not per batch
     sizes = list(range(batch, total, batch)) + [total]
+    known = {} if gaps is None else gaps
+    fits: dict[int, Apprentice | ValueError] = {}
+
+    def fit(n: int) -> Apprentice | ValueError:
+        if n not in fits:
+            head = transitions.head(n)
+            try:
+                fits[n] = fit_apprentice(
+                    head.states, actions[head.actions], head.next_states, features, ridge, periodic
+                )
+            except ValueError as error:  # too few or too uniform samples yet: grow the set
+                fits[n] = error
+        return fits[n]
+
     last_error: ValueError | None = None
     apprentice: Apprentice | None = None
-    for n in sizes:
-        part = transitions.head(n)
-        try:
-            apprentice = fit_apprentice(part.states, actions[part.actions], part.next_states, features, ridge, periodic)
-        except ValueError as error:  # too few or too uniform samples yet: grow the set
-            last_error = error
+    ahead = 1  # how many sizes' gaps the next call of utility_gaps finds
+    for i, n in enumerate(sizes):
+        if known.get(n, -math.inf) > zeta and n < total:
+            continue  # missed zeta before: refitting it would miss again
+        result = fit(n)
+        if isinstance(result, ValueError):
+            last_error = result
             continue
-        gap = float(utility_gap(apprentice))
+        apprentice = result
+        if n not in known and utility_gaps is None:
+            known[n] = float(utility_gap(apprentice))
+        elif n not in known:
+            # This size and the next ones, fitted now and rolled out together; the
+            # chunk doubles, so a scan that stops early wastes at most its own work.
+            chunk = [n]
+            for m in sizes[i + 1 :]:
+                if len(chunk) == ahead:
+                    break
+                if m not in known and not isinstance(fit(m), ValueError):
+                    chunk.append(m)
+            for m, gap in zip(chunk, utility_gaps([fits[m] for m in chunk])):
+                known[m] = float(gap)
+            ahead *= 2
+        gap = known[n]
         if not math.isfinite(gap):
             raise ValueError(f"utility_gap returned {gap} for an apprentice fitted on {n} samples")
         if gap <= zeta:
@@ -292,24 +333,92 @@ def model_return(
     or indices into ``action_values`` (N,); ``snap`` (:func:`state_snap`) puts the
     predictions back on the target's states. NaN where the model diverges.
     """
-    states, total = starts.copy(), np.zeros(len(starts))
-    alive = np.ones(len(starts), dtype=bool)
+    return model_returns(
+        [model], policy, starts=starts, reward=reward, action_values=action_values, steps=steps, snap=snap
+    )[0]
+
+
+def model_returns(
+    models: Sequence[Any],
+    policy: Callable[[np.ndarray], np.ndarray],
+    *,
+    starts: np.ndarray,
+    reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    action_values: np.ndarray,
+    steps: int,
+    snap: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[float]:
+    """:func:`model_return` of each of ``models``, their rollouts side by side.
+
+    The policy, the reward and ``snap`` are asked once a step for the states of
+    every model still rolling out (each row on its own), so Algorithm 2's
+    candidate apprentices cost about one rollout's calls together; each model
+    steps its own states, and gets what :func:`model_return` gives it alone.
+    """
+    first = np.asarray(starts, dtype=np.float64)
+    n_models, n_starts = len(models), len(first)
+    states = np.repeat(first[None], n_models, axis=0)  # (models, starts, d)
+    totals = np.zeros((n_models, n_starts))
+    alive = np.ones((n_models, n_starts), dtype=bool)
+    rolling = np.ones(n_models, dtype=bool)
+    diverged = np.zeros(n_models, dtype=bool)
     with np.errstate(all="ignore"):
         for _ in range(steps):
-            action = policy(states)
-            values = action if action.ndim == 2 else action_values[action]
-            next_states = model.predict(states, values)
-            if not np.all(np.isfinite(next_states)):
-                return float("nan")  # the model diverged
-            if snap is not None:
-                next_states = snap(next_states)
-            rewards, ended = reward(states, action, next_states)
-            total += np.where(alive, rewards, 0.0)
-            alive &= ~ended
-            states = next_states
-            if not alive.any():
+            live = np.flatnonzero(rolling)
+            if len(live) == 0:
                 break
-    return float(total.mean())
+            now = states[live]
+            action = policy(now.reshape(-1, now.shape[2]))
+            values = action if action.ndim == 2 else action_values[action]
+            values = values.reshape(len(live), n_starts, -1)
+            next_states = _predict_each([models[i] for i in live], now, values)
+            finite = np.isfinite(next_states).all(axis=(1, 2))
+            diverged[live[~finite]] = True
+            rolling[live[~finite]] = False
+            if not finite.all():
+                live, now, next_states = live[finite], now[finite], next_states[finite]
+                action = action.reshape(len(finite), n_starts, *action.shape[1:])[finite]
+                action = action.reshape(-1, *action.shape[2:])
+            if len(live) == 0:
+                break
+            flat_next = next_states.reshape(-1, next_states.shape[2])
+            if snap is not None:
+                flat_next = snap(flat_next)
+            rewards, ended = reward(now.reshape(-1, now.shape[2]), action, flat_next)
+            rewards = np.asarray(rewards).reshape(len(live), n_starts)
+            totals[live] += np.where(alive[live], rewards, 0.0)
+            alive[live] &= ~np.asarray(ended).reshape(len(live), n_starts)
+            states[live] = flat_next.reshape(len(live), n_starts, -1)
+            rolling[live] = alive[live].any(axis=1)
+    return [float("nan") if diverged[i] else float(totals[i].mean()) for i in range(n_models)]
 
 
-__all__ = ["Apprentice", "fit_apprentice", "learn_apprentice", "model_return", "state_snap"]
+def _predict_each(models: list[Any], states: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Model i's ``predict(states[i], values[i])`` for each i, (M, N, d).
+
+    Apprentices sharing one row-exact basis evaluate it once over every row and
+    take their products as one stack (each product is the 2-D one ``predict``
+    makes: the same bits); any other models predict one by one.
+    """
+    first = models[0]
+    shared = getattr(getattr(first, "features", None), "row_exact", False) and all(
+        isinstance(m, Apprentice) and m.features is first.features and m.periodic == first.periodic for m in models
+    )
+    if not shared:
+        return np.stack([model.predict(states[i], values[i]) for i, model in enumerate(models)])
+    n_models, n, d = states.shape
+    phi = first.features(states.reshape(-1, d)).reshape(n_models, n, -1)
+    actions = _as_actions(values.reshape(n_models * n, -1), n_models * n).reshape(n_models, n, -1)
+    weights = np.stack([model.W for model in models])  # (M, d, k)
+    controls = np.stack([model.B for model in models])  # (M, d, m)
+    drift = np.matmul(phi, weights.transpose(0, 2, 1))
+    cols = None if first.periodic is None else np.flatnonzero(first.periodic)
+    if cols is not None:
+        drift[..., cols] += states[..., cols]
+    out = drift + np.matmul(actions, controls.transpose(0, 2, 1))
+    if cols is not None:
+        out[..., cols] = wrap_angle(out[..., cols])
+    return out
+
+
+__all__ = ["Apprentice", "fit_apprentice", "learn_apprentice", "model_return", "model_returns", "state_snap"]

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable, NoReturn, Protocol, runtime_checkable
+from typing import Any, Callable, NoReturn, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -57,6 +57,9 @@ class TransferProblem:
       model_return: U_Mhat(pi), the same policy's mean return when ``model`` stands
         in for the target (the target task's reward and end conditions applied to
         the model's predicted states); None where the task has no such reward.
+      model_returns: ``model_return`` of several models in one call, each value
+        what ``model_return`` gives it (one rollout of them side by side); None:
+        ``model_return`` is asked model by model.
       target_step: the real target simulator's one step, (N, dT) states, (N, mT)
         action values -> (N, dT); for oracle ablations only (it is not a sample
         budget a fair method may use).
@@ -92,6 +95,7 @@ class TransferProblem:
     seed: int = 0
     target_return: Callable[[Policy], float] | None = None
     model_return: Callable[[Model, Policy], float] | None = None
+    model_returns: Callable[[Sequence[Model], Policy], Sequence[float]] | None = None
     target_step: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
     policy_samples: Callable[[Policy, int], Transitions] | None = None
     target_reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
@@ -147,16 +151,28 @@ class TransferProblem:
         counted against the method that asks. A model whose rollout diverges is as
         far from the target as can be (1e300).
         """
+        return self.utility_gaps([model], kind)[0]
+
+    def utility_gaps(self, models: Sequence[Model], kind: str = "absolute") -> list[float]:
+        """:meth:`utility_gap` of each of ``models``, their U_Mhat in one ``model_returns`` call where given."""
         if not self.has_utility_gap:
             raise ValueError("this problem has no target_return/model_return hooks: no utility gap")
         assert self.target_return is not None and self.model_return is not None
-        u_true = float(self.target_return(self.projected_source_policy()))
-        u_hat = self.model_return(model, self.projected_source_policy())
-        if not math.isfinite(u_hat):
-            return 1e300
-        if kind == "relative":
-            return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
-        return u_true - u_hat
+        policy = self.projected_source_policy()
+        u_true = float(self.target_return(policy))
+        if self.model_returns is not None:
+            u_hats = list(self.model_returns(models, policy))
+        else:
+            u_hats = [self.model_return(model, policy) for model in models]
+        return [_gap(u_true, u_hat, kind) for u_hat in u_hats]
+
+
+def _gap(u_true: float, u_hat: float, kind: str) -> float:
+    if not math.isfinite(u_hat):
+        return 1e300
+    if kind == "relative":
+        return abs(u_true - u_hat) / max(abs(u_true), 1e-9)
+    return u_true - u_hat
 
 
 @runtime_checkable

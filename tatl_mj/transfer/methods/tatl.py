@@ -97,7 +97,7 @@ class TATL:
                 periodic=periodic,
             )
             return apprentice, len(target_samples)
-        return learn_apprentice(
+        learned = learn_apprentice(
             target_samples,
             actions,
             self.features(target),
@@ -106,7 +106,34 @@ class TATL:
             self.batch or len(target_samples),
             self.ridge,
             periodic=periodic,
+            gaps=self._known_gaps(problem, target_samples),
+            # Sizes ahead of need are rolled out only where that costs about one rollout.
+            utility_gaps=functools.partial(problem.utility_gaps, kind=self.gap) if problem.model_returns else None,
         )
+        # Every budget's Algorithm 2 uses U_M, even one whose gaps were all known:
+        # the problem counts its real-target rollouts against this budget.
+        assert problem.target_return is not None
+        problem.target_return(problem.projected_source_policy())
+        return learned
+
+    def _known_gaps(self, problem: TransferProblem, target_samples: Transitions) -> dict[int, float]:
+        """Algorithm 2's gaps by head size found at the budgets of this run so far.
+
+        A later budget keeps the earlier samples as its head, so its heads' fits
+        and gaps are theirs (the problem's hooks are functions of their
+        arguments): found once, its scan skips the sizes that missed zeta.
+        """
+        key = ("ta-tl-gaps", id(self))
+        kept = problem.replays.get(key)
+        longer, gaps = target_samples, {}
+        if kept is not None and kept[0] is self:
+            seen, found = kept[1], kept[2]
+            m = min(len(seen), len(target_samples))
+            if _same_data(seen.head(m), target_samples.head(m)):
+                longer = seen if len(seen) > len(target_samples) else target_samples
+                gaps = {n: gap for n, gap in found.items() if longer is seen or n <= m}
+        problem.replays[key] = (self, longer, gaps)
+        return gaps
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
         apprentice, used = self.fit_apprentice(problem, target_samples)
