@@ -55,15 +55,20 @@ def test_degenerate_input_raises_clear_errors():
     assert np.all(np.isfinite(app.B))
 
 
-def test_learn_apprentice_grows_batches_until_the_utility_gap_is_small():
-    """Algorithm 2 with a stand-in gap |B_hat - B|: it stops at the first batch size whose fit
-    meets zeta, and returns that sample count."""
+def _noisy_stream():
+    """3000 transitions of the known system under 5 random actions, noise std 0.05: (B, actions, t)."""
     rng = np.random.default_rng(2)
-    w_true, b_true, s, a, s_next = _system(-1.0, rng, 3000, noise=0.05)
+    w_true, b_true, s, _, _ = _system(-1.0, rng, 3000, noise=0.05)
     action_set = rng.uniform(-2, 2, size=(5, 2))
     idx = rng.integers(5, size=3000)
     s_next = FEATURES(s) @ w_true.T + action_set[idx] @ b_true.T + 0.05 * rng.normal(size=(3000, 2))
-    t = Transitions(s, idx, np.zeros(3000), s_next, np.zeros(3000, bool), np.zeros(3000, bool))
+    return b_true, action_set, Transitions(s, idx, np.zeros(3000), s_next, np.zeros(3000, bool), np.zeros(3000, bool))
+
+
+def test_learn_apprentice_grows_batches_until_the_utility_gap_is_small():
+    """Algorithm 2 with a stand-in gap |B_hat - B|: it stops at the first batch size whose fit
+    meets zeta, and returns that sample count."""
+    b_true, action_set, t = _noisy_stream()
 
     def gap(app):
         return float(np.abs(app.B - b_true).max())
@@ -205,12 +210,7 @@ def test_algorithm_2_with_sizes_rolled_out_ahead_and_gaps_kept_finds_the_same_ap
     """The scan with utility_gaps (sizes ahead of need, 1, 2, 4, ... at a time) and with the
     gaps of a smaller budget kept returns the apprentice and sample count of the plain scan,
     bit for bit, with fewer calls."""
-    rng = np.random.default_rng(2)
-    w_true, b_true, s, a, _ = _system(-1.0, rng, 3000, noise=0.05)
-    action_set = rng.uniform(-2, 2, size=(5, 2))
-    idx = rng.integers(5, size=3000)
-    s_next = FEATURES(s) @ w_true.T + action_set[idx] @ b_true.T + 0.05 * rng.normal(size=(3000, 2))
-    t = Transitions(s, idx, np.zeros(3000), s_next, np.zeros(3000, bool), np.zeros(3000, bool))
+    b_true, action_set, t = _noisy_stream()
     calls = []
 
     def gap(app):

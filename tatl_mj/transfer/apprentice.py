@@ -314,28 +314,10 @@ def state_snap(target: TaskDescription) -> Callable[[np.ndarray], np.ndarray] | 
     return snap
 
 
-def model_return(
-    model: Any,
-    policy: Callable[[np.ndarray], np.ndarray],
-    *,
-    starts: np.ndarray,
-    reward: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-    action_values: np.ndarray,
-    steps: int,
-    snap: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> float:
-    """U_Mhat(pi): ``policy``'s mean return when ``model`` stands in for the target (Algorithm 2).
-
-    From each of ``starts`` (N, d), ``steps`` steps of the policy on
-    ``model.predict(states, action_values)``, each scored by the target task's own
-    ``reward(states, actions, next_states) -> (rewards, absorbing)``; an episode
-    earns nothing after its absorbing step. ``policy`` returns action values (N, m)
-    or indices into ``action_values`` (N,); ``snap`` (:func:`state_snap`) puts the
-    predictions back on the target's states. NaN where the model diverges.
-    """
-    return model_returns(
-        [model], policy, starts=starts, reward=reward, action_values=action_values, steps=steps, snap=snap
-    )[0]
+def model_return(model: Any, policy: Callable[[np.ndarray], np.ndarray], **settings: Any) -> float:
+    """U_Mhat(pi): ``policy``'s mean return when ``model`` stands in for the target
+    (Algorithm 2); ``settings`` are :func:`model_returns`'s keywords."""
+    return model_returns([model], policy, **settings)[0]
 
 
 def model_returns(
@@ -348,12 +330,20 @@ def model_returns(
     steps: int,
     snap: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> list[float]:
-    """:func:`model_return` of each of ``models``, their rollouts side by side.
+    """U_Mhat(pi) of each of ``models``: ``policy``'s mean return when it stands in
+    for the target (Algorithm 2), their rollouts side by side.
+
+    From each of ``starts`` (N, d), ``steps`` steps of the policy on
+    ``model.predict(states, action_values)``, each scored by the target task's own
+    ``reward(states, actions, next_states) -> (rewards, absorbing)``; an episode
+    earns nothing after its absorbing step. ``policy`` returns action values (N, m)
+    or indices into ``action_values`` (N,); ``snap`` (:func:`state_snap`) puts the
+    predictions back on the target's states. NaN where the model diverges.
 
     The policy, the reward and ``snap`` are asked once a step for the states of
     every model still rolling out (each row on its own), so Algorithm 2's
     candidate apprentices cost about one rollout's calls together; each model
-    steps its own states, and gets what :func:`model_return` gives it alone.
+    steps its own states, and gets bit for bit what a rollout of it alone gives.
     """
     first = np.asarray(starts, dtype=np.float64)
     n_models, n_starts = len(models), len(first)
