@@ -355,31 +355,27 @@ def model_returns(
     with np.errstate(all="ignore"):
         for _ in range(steps):
             live = np.flatnonzero(rolling)
-            if len(live) == 0:
-                break
             now = states[live]
-            action = policy(now.reshape(-1, now.shape[2]))
-            values = action if action.ndim == 2 else action_values[action]
-            values = values.reshape(len(live), n_starts, -1)
-            next_states = _predict_each([models[i] for i in live], now, values)
+            flat = policy(now.reshape(-1, now.shape[2]))
+            values = flat if flat.ndim == 2 else action_values[flat]
+            action = flat.reshape(len(live), n_starts, *flat.shape[1:])
+            next_states = _predict_each([models[i] for i in live], now, values.reshape(len(live), n_starts, -1))
             finite = np.isfinite(next_states).all(axis=(1, 2))
             diverged[live[~finite]] = True
             rolling[live[~finite]] = False
-            if not finite.all():
-                live, now, next_states = live[finite], now[finite], next_states[finite]
-                action = action.reshape(len(finite), n_starts, *action.shape[1:])[finite]
-                action = action.reshape(-1, *action.shape[2:])
+            live, now, action, next_states = live[finite], now[finite], action[finite], next_states[finite]
             if len(live) == 0:
                 break
             flat_next = next_states.reshape(-1, next_states.shape[2])
             if snap is not None:
                 flat_next = snap(flat_next)
-            rewards, ended = reward(now.reshape(-1, now.shape[2]), action, flat_next)
-            rewards = np.asarray(rewards).reshape(len(live), n_starts)
-            totals[live] += np.where(alive[live], rewards, 0.0)
+            rewards, ended = reward(now.reshape(-1, now.shape[2]), action.reshape(-1, *action.shape[2:]), flat_next)
+            totals[live] += np.where(alive[live], np.asarray(rewards).reshape(len(live), n_starts), 0.0)
             alive[live] &= ~np.asarray(ended).reshape(len(live), n_starts)
             states[live] = flat_next.reshape(len(live), n_starts, -1)
             rolling[live] = alive[live].any(axis=1)
+            if not rolling.any():
+                break
     return [float("nan") if diverged[i] else float(totals[i].mean()) for i in range(n_models)]
 
 
