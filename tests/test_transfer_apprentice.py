@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
-from tatl_mj.transfer.features import RBF, LinearFeatures, wrap_angle
+from tatl_mj.transfer.apprentice import Apprentice, _counted_normal_equations, fit_apprentice, learn_apprentice
+from tatl_mj.transfer.features import RBF, LinearFeatures, OneHot, wrap_angle
 from tatl_mj.transitions import Transitions
 
 FEATURES = RBF.grid([-1.0, -1.0], [1.0, 1.0], [3, 3], [0.7, 0.7])
@@ -240,3 +240,32 @@ def test_algorithm_2_with_sizes_rolled_out_ahead_and_gaps_kept_finds_the_same_ap
         assert n_ahead <= 1 + np.log2(n_plain + 1)  # one call per doubling chunk
         assert len(calls) == n_plain - min(n_plain, 10)  # the sizes up to 1,000 samples were known
         assert set(known) >= set(range(100, min(plain_n, 1000) + 1, 100))
+
+
+def test_a_one_hot_apprentice_counted_per_cell_is_the_dense_least_squares_bit_for_bit():
+    # A grid's cells and moves are integers, so psi^T psi and psi^T s' are integer
+    # sums: counting them per cell must give the dense products' exact bits.
+    rng = np.random.default_rng(5)
+    cells = OneHot(4, 6)
+    moves = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])
+    n = 3000
+    s = np.column_stack([rng.integers(0, 4, n), rng.integers(0, 6, n)]).astype(np.float64)
+    a = moves[rng.integers(0, 4, n)]
+    wind = np.where(s[:, 1:2] >= 3, [[-1.0, 0.0]], 0.0)
+    s_next = np.clip(s + a + wind, [0, 0], [3, 5])
+    assert _counted_normal_equations(cells, s, a, s_next) is not None  # the path under test
+    assert _counted_normal_equations(cells, s, a, s_next + 0.5) is None
+    fitted = fit_apprentice(s, a, s_next, cells, ridge=1e-3)
+    psi = np.hstack([cells(s), a])
+    theta = np.linalg.solve(psi.T @ psi + 1e-3 * np.eye(psi.shape[1]), psi.T @ s_next)
+    assert fitted.W.tobytes() == np.ascontiguousarray(theta[:24].T).tobytes()
+    assert fitted.B.tobytes() == np.ascontiguousarray(theta[24:].T).tobytes()
+    # It learned the moves and the wind (the walls bend its shared B a little):
+    # from (2, 4) moving right lands nearest (1, 5).
+    assert np.array_equal(np.rint(fitted.predict(np.array([[2.0, 4.0]]), np.array([[0.0, 1.0]]))), [[1.0, 5.0]])
+    # Targets off the integers take the dense path, and agree with it to rounding.
+    half = fit_apprentice(s, a, s_next + 0.5, cells, ridge=1e-3)
+    dense = np.linalg.solve(psi.T @ psi + 1e-3 * np.eye(psi.shape[1]), psi.T @ (s_next + 0.5))
+    assert np.allclose(half.W, dense[:24].T, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="integer"):
+        fit_apprentice(s + 0.25, a, s_next, cells, ridge=1e-3)

@@ -34,6 +34,7 @@ from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.features import (
     Features,
     LinearFeatures,
+    OneHot,
     as_states,
     periodic_difference,
     periodic_mask,
@@ -168,6 +169,12 @@ def fit_apprentice(
         cols = np.flatnonzero(mask)
         s_next = s_next.copy()
         s_next[:, cols] = wrap_angle(s_next[:, cols] - s[:, cols])
+    counted = _counted_normal_equations(features, s, a, s_next) if ridge > 0 else None
+    if counted is not None:
+        gram, moments = counted
+        theta = np.linalg.solve(gram + ridge * np.eye(len(gram)), moments)
+        k = len(gram) - a.shape[1]
+        return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features, periodic=mask)
     phi = features(s)
     psi = np.hstack([phi, a])
     n, p = psi.shape
@@ -192,6 +199,35 @@ def fit_apprentice(
         theta = np.linalg.solve(psi.T @ psi + ridge * np.eye(p), psi.T @ s_next)
     k = phi.shape[1]
     return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features, periodic=mask)
+
+
+def _counted_normal_equations(
+    features: Features, s: np.ndarray, a: np.ndarray, s_next: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(psi^T psi, psi^T s_next)`` counted per cell, or None.
+
+    With a one-hot basis and integer actions and targets (a grid's cells and
+    moves) every entry is a sum of integers, which any order of summation gives
+    exactly: these are the products' very bits, without forming psi (N, k + m).
+    """
+    if not isinstance(features, OneHot) or a.size == 0:
+        return None
+    for x in (a, s_next):
+        # Integer-valued, and every partial sum below 2^53: exact in float64.
+        if not np.array_equal(x, np.rint(x)) or len(x) * max(1.0, float(np.abs(x).max())) ** 2 >= 2.0**52:
+            return None
+    idx = features.index(s)
+    k, m = features.size(s.shape[1]), a.shape[1]
+    gram = np.zeros((k + m, k + m))
+    gram[np.arange(k), np.arange(k)] = np.bincount(idx, minlength=k)
+    for j in range(m):
+        gram[:k, k + j] = gram[k + j, :k] = np.bincount(idx, weights=a[:, j], minlength=k)
+    gram[k:, k:] = a.T @ a
+    moments = np.empty((k + m, s_next.shape[1]))
+    for j in range(s_next.shape[1]):
+        moments[:k, j] = np.bincount(idx, weights=s_next[:, j], minlength=k)
+    moments[k:] = a.T @ s_next
+    return gram, moments
 
 
 def learn_apprentice(
