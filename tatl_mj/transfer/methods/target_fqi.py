@@ -271,8 +271,10 @@ class EpsilonGreedy:
 
     def act(self, states: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """(N,) what one-state calls on each row of ``states`` return, the row having drawn ``draws``' row."""
-        greedy = self.greedy(states) if self.cells and len(states) == 1 else greedy_each(self.q, states)
-        return np.where(draws[:, 0] < self.epsilon, draws[:, 1].astype(np.int64), greedy)
+        if self.cells and len(states) == 1:  # a cell a call (grid collections): scalars, the same answer
+            uniform, action = draws[0]
+            return np.array([int(action)]) if uniform < self.epsilon else self.greedy(states)
+        return np.where(draws[:, 0] < self.epsilon, draws[:, 1].astype(np.int64), greedy_each(self.q, states))
 
 
 @dataclasses.dataclass(frozen=True)
