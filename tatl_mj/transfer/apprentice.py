@@ -169,16 +169,10 @@ def fit_apprentice(
         cols = np.flatnonzero(mask)
         s_next = s_next.copy()
         s_next[:, cols] = wrap_angle(s_next[:, cols] - s[:, cols])
-    counted = _counted_normal_equations(features, s, a, s_next) if ridge > 0 else None
-    if counted is not None:
-        gram, moments = counted
-        theta = np.linalg.solve(gram + ridge * np.eye(len(gram)), moments)
-        k = len(gram) - a.shape[1]
-        return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features, periodic=mask)
-    phi = features(s)
-    psi = np.hstack([phi, a])
-    n, p = psi.shape
     if ridge == 0:
+        phi = features(s)
+        psi = np.hstack([phi, a])
+        n, p = psi.shape
         if n < p:
             raise ValueError(
                 f"too few samples for the apprentice: {n} < {p} unknowns per state coordinate "
@@ -196,9 +190,18 @@ def fit_apprentice(
                 "use ridge > 0 or more varied samples"
             )
     else:
-        theta = np.linalg.solve(psi.T @ psi + ridge * np.eye(p), psi.T @ s_next)
-    k = phi.shape[1]
+        gram, moments = _counted_normal_equations(features, s, a, s_next) or _normal_equations(features, s, a, s_next)
+        theta = np.linalg.solve(gram + ridge * np.eye(len(gram)), moments)
+    k = len(theta) - a.shape[1]
     return Apprentice(W=theta[:k].T, B=theta[k:].T, features=features, periodic=mask)
+
+
+def _normal_equations(
+    features: Features, s: np.ndarray, a: np.ndarray, s_next: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(psi^T psi, psi^T s_next)`` with psi = [phi(s), a]."""
+    psi = np.hstack([features(s), a])
+    return psi.T @ psi, psi.T @ s_next
 
 
 def _counted_normal_equations(
