@@ -431,6 +431,18 @@ def test_step_from_divergence_returns_the_start_state():
     assert got[0, 2] == 0.0 and np.all(np.isfinite(got))
 
 
+def test_a_query_that_diverges_where_an_earlier_one_diverged_still_returns_its_start_state():
+    # MuJoCo's bad-value checks reset the data, warning counts included, and then
+    # count one: the query batch's slot that diverged before shows that same 1 after
+    # diverging again, which a before/after comparison of counts would miss (and
+    # answer with MuJoCo's reset state). Each call must see its own warnings.
+    states = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 2e10, 0.0, 0.0]])
+    for _ in range(3):
+        got = sampling.step_from("cartpole", "balance", states, np.array([2, 1]))
+        np.testing.assert_array_equal(got[1], states[1])
+        assert got[0, 0] > 0.0  # the pushed cart moved: the other query stepped
+
+
 def test_a_diverging_first_substep_is_reported():
     # The bicycle (implicitfast) replays dm_control's first substep after a reset
     # through its hooks; a warning there must end the episode like any other.

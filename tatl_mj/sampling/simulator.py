@@ -246,7 +246,7 @@ class Simulator:
         """
         self.bound(batch, "ctrl")[ids] = controls
         SUBSTEPS[self.key] += len(ids) * self.n_sub
-        before = _warning_totals(batch, ids)
+        _clear_warnings(batch, ids)
         diverged = np.zeros(len(ids), bool)
         if self.legacy_first and first.any():
             for k in np.flatnonzero(first):
@@ -258,8 +258,8 @@ class Simulator:
                 batch.step(ids_rest, nstep=self.n_sub)
         else:
             batch.step(ids, nstep=self.n_sub)
-        # Any new MuJoCo warning is a PhysicsError in dm_control.
-        diverged |= _warning_totals(batch, ids) != before
+        # Any MuJoCo warning is a PhysicsError in dm_control.
+        diverged |= _warned(batch, ids)
         states = self.physics.states_from(self.bound(batch, "qpos")[ids], self.bound(batch, "qvel")[ids])
         return states, diverged
 
@@ -275,11 +275,12 @@ class Simulator:
         """
         k, n = controls.shape[:2]
         SUBSTEPS[self.key] += k * n * self.n_sub
-        before, rows = _warning_totals(batch, ids), batch.state[ids].copy()
+        rows = batch.state[ids].copy()
+        _clear_warnings(batch, ids)
         # The control of a control step is held over its n_sub substeps, as dm_control does.
         per_substep = np.repeat(controls.transpose(1, 0, 2), self.n_sub, axis=1)
         record = batch.rollout(k * self.n_sub, control=per_substep, record=("qpos", "qvel"), ids=ids)
-        if (_warning_totals(batch, ids) != before).any():
+        if _warned(batch, ids).any():
             batch.state[ids] = rows
             return None
         ends = slice(self.n_sub - 1, None, self.n_sub)  # the last substep of each control step
@@ -339,11 +340,22 @@ class Table:
         return int(self.cell_map.index(observed_state(timestep)[None])[0])
 
 
-def _warning_totals(batch: mujoco.batch.Batch, ids: np.ndarray) -> np.ndarray:
-    """Simulations ``ids``' counts of MuJoCo warnings so far: counts only grow, so a new
-    one (a PhysicsError in dm_control) changes the total. Only ``ids`` are read: a
-    query batch grown once to thousands of simulations is stepped ten at a time."""
-    return batch.warning[ids, :, _WARNING_NUMBER].sum(axis=1)
+def _clear_warnings(batch: mujoco.batch.Batch, ids: np.ndarray) -> None:
+    """Zeroes simulations ``ids``' MuJoCo warning counts before a call.
+
+    A count does not only grow: MuJoCo's checks for bad positions, velocities and
+    accelerations reset the data, counts included, and then count one. A simulation
+    that warned once (an earlier episode or query in its slot) would show the same 1
+    after warning again, so counts are cleared and any count after the call is new.
+    Only ``ids`` are touched: a query batch grown once to thousands of simulations is
+    stepped ten at a time.
+    """
+    batch.warning[ids] = 0
+
+
+def _warned(batch: mujoco.batch.Batch, ids: np.ndarray) -> np.ndarray:
+    """Whether simulations ``ids`` warned since :func:`_clear_warnings`."""
+    return batch.warning[ids, :, _WARNING_NUMBER].any(axis=1)
 
 
 @functools.lru_cache(maxsize=16)
