@@ -15,9 +15,10 @@ models (the bicycle) off the environment's numbers. ``tatl bench`` times raw
 
 Two more details make the replay exact. dm_control's legacy step (any
 integrator but RK4) begins with ``mj_step2`` on the stages of the last forward
-pass, which after a reset is ``Physics.after_reset``'s (run with actuation
-disabled by default); the first step of each episode is replayed through the
-domain's own reset hooks (:meth:`Simulator.first_substep`). And a MuJoCo
+pass, which after a reset is ``Physics.after_reset``'s. The suite's domains
+run a full forward there, so their first step is a plain step; a domain with
+dm_control's own (actuation disabled) has the first step of each episode
+replayed through its reset hooks (:meth:`Simulator.first_substep`). And a MuJoCo
 warning during a step ends the episode with discount 0, reward 0 and the last
 finite state, as ``common.Environment`` does.
 
@@ -47,6 +48,7 @@ from dm_control.rl import control
 
 from tatl_mj import suite
 from tatl_mj.description import CellMap
+from tatl_mj.suite.common import StatePhysics
 from tatl_mj.validation import integer, is_integer
 
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION.value
@@ -126,11 +128,16 @@ class Simulator:
         self.random_lengths: dict[float, np.ndarray] = {}
         # dm_control's legacy step (every integrator but RK4) starts a step with
         # mj_step2 on the stages of the last forward pass; after a reset that is
-        # Physics.after_reset's (by default run with actuation disabled, which
-        # leaves actuator_velocity at zero). The first step of an episode is
-        # replayed through the domain's own reset hooks (see first_substep).
-        self.legacy_first = bool(getattr(physics, "legacy_step", True)) and (
-            self.model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4
+        # Physics.after_reset's. dm_control's own runs with actuation disabled, which
+        # leaves actuator_velocity at zero: such a domain's first step of an episode is
+        # replayed through its reset hooks (see first_substep). StatePhysics's is a
+        # full forward at the reset state, whose position and velocity stages (all
+        # that mj_step2 keeps; they do not depend on the controls) are those a plain
+        # mj_step computes there: its first step is a plain step (tested).
+        self.legacy_first = (
+            bool(getattr(physics, "legacy_step", True))
+            and self.model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4
+            and type(physics).after_reset is not StatePhysics.after_reset
         )
 
     def make_env(self, random: Any) -> dm_env.Environment:
