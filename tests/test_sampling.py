@@ -459,7 +459,7 @@ def test_a_domain_with_dm_controls_own_after_reset_has_its_first_step_replayed(m
     env = suite.load("bicycle", "balance", task_kwargs={**kwargs, "random": 0})
     rng = np.random.default_rng(0)
     states, actions = [], rng.integers(len(sim.actions), size=40)
-    for a in actions:
+    for _start in range(len(actions)):
         env.reset()
         for _ in range(int(rng.integers(1, 30))):
             env.step(suite.action_set("bicycle")[int(rng.integers(len(sim.actions)))])
