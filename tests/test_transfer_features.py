@@ -231,6 +231,28 @@ def test_periodic_rbf_coordinate_by_coordinate_equals_the_matrix_form_bit_for_bi
     np.testing.assert_array_equal(fast[5:6], rbf(states[5:6]))  # row-exact: one state alone
 
 
+@pytest.mark.parametrize("periodic", [(True,), (True, False), (False, True), (True, True)])
+def test_periodic_rbf_on_a_grid_equals_the_matrix_form_bit_for_bit(periodic):
+    # On a grid of centres each coordinate's term is formed once per distinct value and
+    # spread by broadcasting; shuffled, the same centres take the per-centre path.
+    rng = np.random.default_rng(5)
+    d = len(periodic)
+    counts = [9] if d == 1 else [7, 6]
+    low, high = [-np.pi, -3.0][:d], [np.pi, 3.0][:d]
+    rbf = RBF.grid(low, high, counts, rng.uniform(0.1, 2.0, size=d), periodic=list(periodic))
+    assert rbf._grid_values is not None and [len(v) for v in rbf._grid_values] == counts
+    states = rng.uniform(-9, 9, size=(3001, d))
+    fast = rbf(states)
+    matrix_form = RBF(rbf.centers, np.diag(rbf.sigma), periodic=periodic)
+    matrix_form.__dict__["_diagonal"] = None
+    np.testing.assert_array_equal(fast, matrix_form(states))
+    order = rng.permutation(len(rbf.centers))
+    shuffled = RBF(rbf.centers[order], np.diag(rbf.sigma).copy(), periodic=periodic)
+    assert shuffled._grid_values is None
+    np.testing.assert_array_equal(fast[:, 1:][:, order], shuffled(states)[:, 1:])
+    np.testing.assert_array_equal(fast[7:8], rbf(states[7:8]))
+
+
 def test_rbf_pickled_without_derived_fields_evaluates_the_same():
     # A run's source cache may hold a basis pickled before a derived field existed.
     import pickle
@@ -239,6 +261,6 @@ def test_rbf_pickled_without_derived_fields_evaluates_the_same():
     states = np.random.default_rng(4).uniform(-4, 4, size=(20, 2))
     expected = rbf(states)
     old = pickle.loads(pickle.dumps(rbf))
-    for name in ("_diagonal", "_center_norms"):
+    for name in ("_diagonal", "_center_norms", "_grid_values"):
         old.__dict__.pop(name, None)
     np.testing.assert_array_equal(old(states), expected)

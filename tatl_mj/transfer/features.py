@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
+import math
 from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
@@ -211,65 +212,87 @@ class RBF:
         return np.diag(inverse).copy()
 
     @functools.cached_property
+    def _grid_values(self) -> list[np.ndarray] | None:
+        """Each coordinate's distinct centre values when the centres are their product in
+        row-major order (the layout of :meth:`grid`), else None."""
+        axes = [np.unique(column, return_inverse=True) for column in self.centers.T]
+        counts = [len(values) for values, _ in axes]
+        if math.prod(counts) != len(self.centers):
+            return None
+        layout = np.indices(counts).reshape(len(counts), -1)
+        if not all(np.array_equal(index, layout[j]) for j, (_, index) in enumerate(axes)):
+            return None
+        return [values for values, _ in axes]
+
+    @functools.cached_property
     def _center_norms(self) -> np.ndarray:
         """|L^-1 c_j|^2 (k,): the same every call."""
         return np.einsum("ij,ij->i", self._scaled_centers, self._scaled_centers)
 
     def __call__(self, states: np.ndarray) -> np.ndarray:
         raw = as_states(states, dim=self.centers.shape[1])
+        out = np.empty((len(raw), len(self.centers) + int(self.bias)))
+        sq = out[:, 1:] if self.bias else out  # filled in place: no copy behind the constant
         if self.periodic is None:
             s = raw @ self._inverse.T
-            sq = np.einsum("ij,ij->i", s, s)[:, None] - 2.0 * s @ self._scaled_centers.T + self._center_norms[None, :]
+            np.add(np.einsum("ij,ij->i", s, s)[:, None] - 2.0 * s @ self._scaled_centers.T, self._center_norms, out=sq)
             np.maximum(sq, 0.0, out=sq)  # rounding may leave a tiny negative
         else:
-            sq = self._wrapped_sq_distances(raw)  # a sum of squares
+            self._wrapped_sq_distances(raw, sq)  # a sum of squares
         sq *= -0.5
-        phi = np.exp(sq, out=sq)
-        if not self.bias:
-            return phi
-        out = np.empty((len(raw), phi.shape[1] + 1))
-        out[:, 0] = 1.0
-        out[:, 1:] = phi
+        np.exp(sq, out=sq)
+        if self.bias:
+            out[:, 0] = 1.0
         return out
 
-    def _wrapped_sq_distances(self, s: np.ndarray) -> np.ndarray:
-        """|L^-1 wrap(s - c_j)|^2, (N, k). The wrap is not a dot product, so the
+    def _wrapped_sq_distances(self, s: np.ndarray, out: np.ndarray) -> None:
+        """out (N, k) = |L^-1 wrap(s - c_j)|^2. The wrap is not a dot product, so the
         differences are formed explicitly, in row blocks to bound memory."""
         if self._diagonal is not None:
-            return self._wrapped_sq_distances_diagonal(s)
+            self._wrapped_sq_distances_diagonal(s, out)
+            return
         k, d = self.centers.shape
         rows = max(1, (1 << 21) // (k * d))
-        out = np.empty((len(s), k))
         for start in range(0, len(s), rows):
             diff = periodic_difference(s[start : start + rows, None, :], self.centers[None, :, :], self.periodic)
             z = diff @ self._inverse.T
             out[start : start + rows] = np.einsum("nkd,nkd->nk", z, z)
-        return out
 
-    def _wrapped_sq_distances_diagonal(self, s: np.ndarray) -> np.ndarray:
+    def _wrapped_sq_distances_diagonal(self, s: np.ndarray, out: np.ndarray) -> None:
         """:meth:`_wrapped_sq_distances` for a diagonal L, bit for bit: the same
         differences, wraps and products (the matrix form's other terms are exact
-        zeros), summed in the same order, one coordinate at a time over (rows, k)."""
-        centers, periodic, scales = self.centers, self.periodic, self._diagonal
-        k = len(centers)
-        rows = max(1, (1 << 21) // k)  # one (rows, k) scratch array beside the output
-        out = np.empty((len(s), k))
-        z = np.empty((min(rows, len(s)), k))
+        zeros), summed in the same order, one coordinate at a time.
+
+        On a grid of centres a coordinate's term depends on the state and that
+        coordinate's value alone, so it is formed once per distinct value (10 of
+        the pendulum's 100 centres) and the two terms are added by broadcasting."""
+        grid = self._grid_values
+        if grid is not None:
+            terms = [self._coordinate_term(s, j, values) for j, values in enumerate(grid)]
+            if len(terms) == 1:
+                out[...] = terms[0]
+                return
+            cube = out.reshape(len(s), *(len(v) for v in grid))
+            if np.shares_memory(cube, out):  # a view: numpy splits a contiguous axis without copying
+                np.add(terms[0][:, :, None], terms[1][:, None, :], out=cube)
+                return
+        rows = max(1, (1 << 21) // len(self.centers))  # one (rows, k) term beside the output
         for start in range(0, len(s), rows):
             block, part = s[start : start + rows], out[start : start + rows]
-            scratch = z[: len(block)]
-            for j, scale in enumerate(scales):
-                target = part if j == 0 else scratch
-                np.subtract(block[:, j : j + 1], centers[None, :, j], out=target)
-                if periodic[j]:  # wrap_angle, in place
-                    target += np.pi
-                    np.mod(target, TWO_PI, out=target)
-                    target -= np.pi
-                target *= scale
-                target *= target
-                if j:
-                    part += target
-        return out
+            part[...] = self._coordinate_term(block, 0, self.centers[:, 0])
+            for j in range(1, len(self._diagonal)):
+                part += self._coordinate_term(block, j, self.centers[:, j])
+
+    def _coordinate_term(self, s: np.ndarray, j: int, values: np.ndarray) -> np.ndarray:
+        """(N, len(values)): ``(scale_j * wrap(s_j - value))^2``, wrapped on a periodic coordinate."""
+        term = np.subtract(s[:, j : j + 1], values[None, :])
+        if self.periodic[j]:  # wrap_angle, in place
+            term += np.pi
+            np.mod(term, TWO_PI, out=term)
+            term -= np.pi
+        term *= self._diagonal[j]
+        term *= term
+        return term
 
 
 def _split_count(total: int, spans: np.ndarray) -> list[int]:
