@@ -9,6 +9,8 @@
 4. The oracle (the true model) and an exact apprentice give the same actions.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_transfer_tatl import CHI, SOURCE_ACTIONS, OneStepLQRQ, source_step
@@ -365,22 +367,42 @@ def test_apprentice_affine_parts_predict_exactly():
         _goal_policy(integrator_step, affine=(a, b[:1], c))
 
 
-def test_shared_source_decides_as_each_policy_alone():
-    """Policies differing only in their apprentice share one source rollout: each gets the
-    actions it computes alone; policies with another source are not grouped."""
-    from tatl_mj.transfer.methods.horizon import shared_source
+@pytest.mark.parametrize("affine", [False, True])
+@pytest.mark.parametrize("reference", ["source", "zero"])
+def test_shared_decisions_decide_as_each_policy_alone(reference, affine):
+    """Policies differing only in their apprentice decide together (one source rollout,
+    one correction): each gets, bit for bit, the actions it computes alone; policies with
+    another horizon are not grouped."""
+    from tatl_mj.transfer.methods.horizon import shared_decisions
 
     common = dict(source_q=OneStepLQRQ(), mapping=CHI, source_step=source_step, target_actions=2.0 * SOURCE_ACTIONS)
+    if reference == "zero":
+        common = dict(reference="zero")
+    apprentices = [_noisy_apprentice(seed) for seed in range(3)]
     policies = [
-        HorizonTATLPolicy(_noisy_apprentice(seed).predict, [-50.0], [50.0], horizon=4, **common) for seed in range(3)
+        HorizonTATLPolicy(
+            a.predict,
+            [-1.0],
+            [1.0],
+            horizon=4,
+            affine=a.affine() if affine else None,
+            admissible=[[-1.0], [0.0], [1.0]] if seed == 0 else None,
+            **common,
+        )
+        for seed, a in enumerate(apprentices)
     ]
-    decide = shared_source(policies)
+    assert shared_decisions(policies) is None  # one snaps to a discrete set, the others do not
+    policies = [dataclasses.replace(p, admissible=None) for p in policies]
+    decide = shared_decisions(policies)
     assert decide is not None
     rng = np.random.default_rng(3)
-    states = [CHI.chi(rng.uniform(-2, 2, size=(n, 2))) for n in (4, 1)]
-    got = decide([0, 2], states)
-    for b, s, actions in zip([0, 2], states, got):
+    states = [CHI.chi(rng.uniform(-2, 2, size=(n, 2))) for n in (40, 1, 7)]
+    got = decide([0, 2, 1], states)
+    clipped = 0
+    for b, s, actions in zip([0, 2, 1], states, got):
         np.testing.assert_array_equal(actions, policies[b](s))
-    other = HorizonTATLPolicy(_noisy_apprentice(0).predict, [-50.0], [50.0], horizon=5, **common)
-    assert shared_source([policies[0], other]) is None
-    assert shared_source(policies[:1]) is None
+        clipped += int(np.sum(np.abs(actions) == 1.0))
+    assert clipped > 0  # the limits are in play
+    other = dataclasses.replace(policies[0], horizon=5)
+    assert shared_decisions([policies[0], other]) is None
+    assert shared_decisions(policies[:1]) is None

@@ -148,7 +148,7 @@ def evaluate_curve(
     """Each policy's per-episode returns and lengths on the target task, from the same starts,
     all in one lockstep batch (a learning curve's budgets), and with ``record`` each one's
     per-episode (states, action values) lists for steadiness."""
-    together = horizon.shared_source(policies) or sampling.one_by_one(policies)
+    together = horizon.shared_decisions(policies) or sampling.one_by_one(policies)
     calls: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in policies]
 
     def joint(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:

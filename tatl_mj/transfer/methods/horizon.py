@@ -314,23 +314,37 @@ class HorizonTATLPolicy:
         caller rolled the source for several policies at once (:func:`shared_source`).
         """
         s_T = as_states(target_states, "target_states")
-        n, d = s_T.shape
-        m = self.target_low.size
-        weights = np.ones(d) if self.weights is None else self.weights
-        if weights.size != d:
-            raise ValueError(f"weights has {weights.size} entries, target states have {d} coordinates")
-        if self.periodic is not None and len(self.periodic) != d:
-            raise ValueError(f"periodic has {len(self.periodic)} entries, target states have {d} coordinates")
+        self._check_coordinates(s_T.shape[1])
         if self.reference == "source":
             part = self._source_references(s_T) if source_part is None else source_part
             s_hat_S, a_S, source_states, references = part
-            nominal = self.target_actions[a_S]
         else:
             s_hat_S = a_S = source_states = None
-            references = np.zeros((n, self.horizon, d))
-            nominal = np.broadcast_to(np.clip(0.0, self.target_low, self.target_high), (n, m)).copy()
+            references = np.zeros((len(s_T), self.horizon, s_T.shape[1]))
+        nominal = self._nominal(len(s_T), a_S)
         free, control = self._responses(s_T, nominal)
-        root = np.sqrt(weights)
+        adaptive, action = self._correction(references, nominal, free, control)
+        return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
+
+    def _check_coordinates(self, d: int) -> None:
+        if self.weights is not None and self.weights.size != d:
+            raise ValueError(f"weights has {self.weights.size} entries, target states have {d} coordinates")
+        if self.periodic is not None and len(self.periodic) != d:
+            raise ValueError(f"periodic has {len(self.periodic)} entries, target states have {d} coordinates")
+
+    def _nominal(self, n: int, a_S: np.ndarray | None) -> np.ndarray:
+        """a_0 (N, mT): the source's first action seen in the target, or the clipped zero."""
+        if self.reference == "source":
+            return self.target_actions[a_S]
+        return np.broadcast_to(np.clip(0.0, self.target_low, self.target_high), (n, self.target_low.size)).copy()
+
+    def _correction(
+        self, references: np.ndarray, nominal: np.ndarray, free: np.ndarray, control: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """D and the clipped (snapped) action from the responses: each row on its own."""
+        n, _, d = free.shape
+        m = nominal.shape[1]
+        root = np.sqrt(np.ones(d) if self.weights is None else self.weights)
         gap = root * periodic_difference(free, references, self.periodic)  # (N, H, d)
         rows = (root[None, None, :, None] * control).reshape(n, self.horizon * d, m)
         adaptive = -_least_squares(
@@ -340,46 +354,64 @@ class HorizonTATLPolicy:
         if self.admissible is not None:
             gaps = np.linalg.norm(action[:, None, :] - self.admissible[None, :, :], axis=2)
             action = self.admissible[np.argmin(gaps, axis=1)]
-        return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
+        return adaptive, action
 
     def __call__(self, target_states: np.ndarray) -> np.ndarray:
         """(N, dT) target states -> (N, mT) target action values."""
         return self.step(target_states).action
 
 
-_SOURCE_SIDE = ("source_q", "mapping", "source_step", "source_zero", "horizon", "step_ratio", "periodic")
+_SOURCE_SIDE = ("source_q", "mapping", "source_step", "source_zero", "step_ratio")
+# What a decision's correction depends on besides the responses: equal across the
+# budgets of one unit, which differ in their model (the apprentice) alone.
+_CONTROLLER_SIDE = ("target_low", "target_high", "horizon", "weights", "reference", "periodic", "admissible")
 
 
-def _same_source(policy: object, first: object) -> bool:
+def _same(policy: object, first: object, fields: tuple[str, ...]) -> bool:
+    return all(
+        getattr(policy, f) is getattr(first, f) or np.array_equal(getattr(policy, f), getattr(first, f)) for f in fields
+    )
+
+
+def _decide_together(policy: object, first: object) -> bool:
     if not (isinstance(policy, HorizonTATLPolicy) and isinstance(first, HorizonTATLPolicy)):
         return False
-    same = all(
-        getattr(policy, f) is getattr(first, f) or np.array_equal(getattr(policy, f), getattr(first, f))
-        for f in _SOURCE_SIDE
+    if not _same(policy, first, _CONTROLLER_SIDE):
+        return False
+    return first.reference == "zero" or (
+        _same(policy, first, _SOURCE_SIDE) and np.array_equal(policy.target_actions, first.target_actions)
     )
-    return same and policy.reference == "source" and np.array_equal(policy.target_actions, first.target_actions)
 
 
-def shared_source(policies: list) -> Callable[[list[int], list[np.ndarray]], list[np.ndarray]] | None:
-    """Several horizon policies' decisions with one source rollout for all their states, or None.
+def shared_decisions(policies: list) -> Callable[[list[int], list[np.ndarray]], list[np.ndarray]] | None:
+    """Several horizon policies' decisions for all their states at once, or None.
 
-    The budgets of one horizon TA-TL unit share the source side (Q_S, chi, P_S, H, rho)
-    and differ in the apprentice. A row's source rollout does not depend on the other
-    rows, so rolling every policy's states at once gives each what it rolls alone, in
-    a tenth of the source queries. None unless there are several such policies.
+    The budgets of one horizon TA-TL unit share the source side (Q_S, chi, P_S, rho)
+    and the controller (H, W, limits) and differ in the model (the apprentice). A row's
+    decision does not depend on the other rows, so every policy's states take one
+    source rollout (a tenth of the source queries) and one correction; only the
+    responses are each policy's own. None unless there are several such policies.
     """
-    if len(policies) < 2 or not all(_same_source(p, policies[0]) for p in policies):
+    if len(policies) < 2 or not all(_decide_together(p, policies[0]) for p in policies):
         return None
     first = policies[0]
 
     def decide(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
         rows = [as_states(s, "target_states") for s in states]
-        part = first._source_references(np.concatenate(rows))
+        s_T = np.concatenate(rows)
+        first._check_coordinates(s_T.shape[1])
         ends = np.cumsum([len(r) for r in rows])
         starts = ends - [len(r) for r in rows]
-        return [
-            policies[b].step(r, tuple(x[a:z] for x in part)).action for b, r, a, z in zip(blocks, rows, starts, ends)
-        ]
+        if first.reference == "source":
+            _, a_S, _, references = first._source_references(s_T)
+        else:
+            a_S, references = None, np.zeros((len(s_T), first.horizon, s_T.shape[1]))
+        nominal = first._nominal(len(s_T), a_S)
+        responses = [policies[b]._responses(s_T[a:z], nominal[a:z]) for b, a, z in zip(blocks, starts, ends)]
+        free = np.concatenate([f for f, _ in responses])
+        control = np.concatenate([g for _, g in responses])
+        _, action = first._correction(references, nominal, free, control)
+        return [action[a:z] for a, z in zip(starts, ends)]
 
     return decide
 
