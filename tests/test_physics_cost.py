@@ -44,7 +44,10 @@ def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monke
     assert report["ratio"] == pytest.approx(1.0)
     assert report["by_task"]["pendulum/swingup"]["substeps"] == 4000
     assert report["records_without_counts"] == 1
-    assert "work / physics = 1.0x (1 older records without counts left out of both)" in runner.format_physics(report)
+    assert "work / physics = 1.00x (1 older records without counts left out of both)" in runner.format_physics(report)
+    # A ratio just above a 3x target reads as above it.
+    above = {**report, "work_s": 3977.6, "physics_s": 1308.4, "ratio": 3977.6 / 1308.4, "records_without_counts": 0}
+    assert "work / physics = 3.04x" in runner.format_physics(above)
 
 
 def test_a_unit_records_the_seconds_of_its_fqi_fits(tmp_path):

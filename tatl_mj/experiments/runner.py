@@ -651,7 +651,8 @@ def format_physics(report: dict[str, Any]) -> str:
     line = (
         f"work: {report['work_s']:.1f} s over the records; physics: {substeps:,} MuJoCo substeps = "
         f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); "
-        f"work / physics = {report['ratio']:.1f}x{note}"
+        # Two decimals: the target is 3x, and 3.04 must not print as 3.0.
+        f"work / physics = {report['ratio']:.2f}x{note}"
     )
     if report.get("floor_s") is None:
         return line
