@@ -307,24 +307,24 @@ class HorizonTATLPolicy:
         control = moved.transpose(2, 0, 3, 1) / step[:, None, None, :]  # (N, H, d, m)
         return free, control
 
-    def step(self, target_states: np.ndarray, source_part: tuple[np.ndarray, ...] | None = None) -> HorizonStep:
-        """One decision for (N, dT) target states, with every intermediate.
-
-        ``source_part``: what ``_source_references`` gives for these states, when the
-        caller rolled the source for several policies at once (:func:`shared_source`).
-        """
+    def step(self, target_states: np.ndarray) -> HorizonStep:
+        """One decision for (N, dT) target states, with every intermediate."""
         s_T = as_states(target_states, "target_states")
         self._check_coordinates(s_T.shape[1])
-        if self.reference == "source":
-            part = self._source_references(s_T) if source_part is None else source_part
-            s_hat_S, a_S, source_states, references = part
-        else:
-            s_hat_S = a_S = source_states = None
-            references = np.zeros((len(s_T), self.horizon, s_T.shape[1]))
+        s_hat_S, a_S, source_states, references = self._references(s_T)
         nominal = self._nominal(len(s_T), a_S)
         free, control = self._responses(s_T, nominal)
         adaptive, action = self._correction(references, nominal, free, control)
         return HorizonStep(s_T, s_hat_S, a_S, source_states, references, nominal, free, control, adaptive, action)
+
+    def _references(
+        self, s_T: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, np.ndarray]:
+        """x_0, a_S, the source rollout and the references (N, H, dT); the source parts
+        are None for the zero reference, whose references are all 0."""
+        if self.reference == "source":
+            return self._source_references(s_T)
+        return None, None, None, np.zeros((len(s_T), self.horizon, s_T.shape[1]))
 
     def _check_coordinates(self, d: int) -> None:
         if self.weights is not None and self.weights.size != d:
@@ -402,10 +402,7 @@ def shared_decisions(policies: list) -> Callable[[list[int], list[np.ndarray]], 
         first._check_coordinates(s_T.shape[1])
         ends = np.cumsum([len(r) for r in rows])
         starts = ends - [len(r) for r in rows]
-        if first.reference == "source":
-            _, a_S, _, references = first._source_references(s_T)
-        else:
-            a_S, references = None, np.zeros((len(s_T), first.horizon, s_T.shape[1]))
+        _, a_S, _, references = first._references(s_T)
         nominal = first._nominal(len(s_T), a_S)
         responses = [policies[b]._responses(s_T[a:z], nominal[a:z]) for b, a, z in zip(blocks, starts, ends)]
         free = np.concatenate([f for f, _ in responses])
