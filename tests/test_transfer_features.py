@@ -253,6 +253,24 @@ def test_periodic_rbf_on_a_grid_equals_the_matrix_form_bit_for_bit(periodic):
     np.testing.assert_array_equal(fast[7:8], rbf(states[7:8]))
 
 
+@pytest.mark.parametrize("n", [1, 7, 300, 20_000])
+@pytest.mark.parametrize("bias", [True, False])
+def test_rbf_matrix_form_in_place_equals_the_expression_bit_for_bit(n, bias):
+    # The plain (non-periodic) basis forms |s|^2 - 2 s.c + |c|^2 in its output, step by
+    # step; the numbers must be those of the expression with temporaries, or every
+    # bicycle and cart-pole record would move. 4-D like the bicycle's 256-centre basis.
+    rng = np.random.default_rng(11)
+    rbf = RBF.grid([-0.5, -1.5, -0.2, -1.5], [0.5, 1.5, 0.2, 1.5], 256, [0.25, 0.7, 0.1, 0.7], bias=bias)
+    states = rng.uniform(-1.0, 1.0, size=(n, 4))
+    s = states @ rbf._inverse.T
+    sq = np.einsum("ij,ij->i", s, s)[:, None] - 2.0 * s @ rbf._scaled_centers.T + rbf._center_norms
+    expected = np.exp(-0.5 * np.maximum(sq, 0.0))
+    got = rbf(states)
+    np.testing.assert_array_equal(got[:, 1:] if bias else got, expected)
+    if bias:
+        np.testing.assert_array_equal(got[:, 0], 1.0)
+
+
 def test_rbf_pickled_without_derived_fields_evaluates_the_same():
     # A run's source cache may hold a basis pickled before a derived field existed.
     import pickle

@@ -10,6 +10,7 @@ from tatl_mj.transfer.fqi import (
     LinearQ,
     LinearRegressor,
     TabularQ,
+    _gathered_columns,
     fitted_q_iteration,
     make_regressor,
     q_iteration,
@@ -256,6 +257,20 @@ def test_one_hot_fqi_with_ridge_zero_is_q_iteration_on_the_empirical_model():
     q = fitted_q_iteration(data, 4, LinearRegressor(basis, ridge=0.0), gamma, 600)
     cells = np.stack(np.divmod(np.arange(n_states), 5), axis=1).astype(float)
     np.testing.assert_allclose(q.values(cells), exact, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("n", [0, 1, 255, 256, 257, 5_001])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_gathered_columns_are_the_gathered_rows_transposed(n, dtype):
+    # FQI's passes read the features gathered by sample order and transposed; the blocked
+    # copy must give exactly what the one-shot gather and transpose give.
+    rng = np.random.default_rng(n)
+    matrix = rng.normal(size=(max(n, 3), 17))
+    rows = rng.integers(len(matrix), size=n)
+    got = _gathered_columns(matrix, rows, dtype)
+    expected = np.ascontiguousarray(matrix[rows].T, dtype=dtype)
+    assert got.dtype == dtype and got.flags.c_contiguous and got.shape == (17, n)
+    np.testing.assert_array_equal(got, expected)
 
 
 def test_one_hot_q_values_are_the_indicator_product_exactly():

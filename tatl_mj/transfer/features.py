@@ -235,7 +235,10 @@ class RBF:
         sq = out[:, 1:] if self.bias else out  # filled in place: no copy behind the constant
         if self.periodic is None:
             s = raw @ self._inverse.T
-            np.add(np.einsum("ij,ij->i", s, s)[:, None] - 2.0 * s @ self._scaled_centers.T, self._center_norms, out=sq)
+            # |s|^2 - 2 s.c + |c|^2, each step in place (no (N, k) temporaries): the same operations.
+            np.matmul(2.0 * s, self._scaled_centers.T, out=sq)
+            np.subtract(np.einsum("ij,ij->i", s, s)[:, None], sq, out=sq)
+            np.add(sq, self._center_norms, out=sq)
             np.maximum(sq, 0.0, out=sq)  # rounding may leave a tiny negative
         else:
             self._wrapped_sq_distances(raw, sq)  # a sum of squares
