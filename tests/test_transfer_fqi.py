@@ -1,5 +1,7 @@
 """Known answers for Fitted Q-Iteration and exact Q-iteration (tatl_mj.transfer.fqi)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -234,6 +236,36 @@ def test_one_hot_fqi_on_the_empirical_model_equals_the_sample_path(ridge):
     q = fitted_q_iteration(data, 4, LinearRegressor(basis, ridge=ridge), 0.95, 60)
     old = _reference_linear_fqi(data, 4, basis, ridge, 0.95, 60)
     assert _relative_error(q.weights, old) < 1e-8, _relative_error(q.weights, old)
+
+
+@dataclasses.dataclass(frozen=True)
+class _DenseIndicators:
+    """OneHot's matrix, as a basis FQI does not know to be one-hot (it multiplies by it)."""
+
+    basis: OneHot
+
+    def __call__(self, states: np.ndarray) -> np.ndarray:
+        return self.basis(states)
+
+    def size(self, state_dim: int) -> int:
+        return self.basis.size(state_dim)
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+@pytest.mark.parametrize("n, with_prior", [(5_000, True), (60, False), (60, True)])
+def test_one_hot_fqi_on_samples_picks_what_the_indicator_product_gives(n, with_prior, precision):
+    """On the sample path (a prior, or too few samples for the counted model), a one-hot
+    basis's next-state pass picks weight columns instead of multiplying by indicator
+    columns: the same weights, bit for bit."""
+    data, basis = _random_grid_data(n, seed=6), OneHot(4, 5)
+    prior = LinearQ(basis, np.random.default_rng(2).normal(size=(4, 20))) if with_prior else None
+    fits = [
+        fitted_q_iteration(data, 4, LinearRegressor(b, 1e-6, precision), 0.95, 60, prior_q=prior)
+        for b in (basis, _DenseIndicators(basis))
+    ]
+    picked, multiplied = [q.residual.weights if with_prior else q.weights for q in fits]
+    assert np.abs(picked).max() > 0
+    np.testing.assert_array_equal(picked, multiplied)
 
 
 def test_one_hot_fqi_with_ridge_zero_is_q_iteration_on_the_empirical_model():

@@ -372,7 +372,12 @@ def _fqi_linear(
         phi_seen = phi_states[seen]
         gram = (phi_seen.T * counts[a, seen]) @ phi_seen + reg.ridge * np.eye(k)
         factors.append(scipy.linalg.cho_factor(gram, check_finite=False))
-    phi_next = reg.features(nexts)
+    on_samples = prior is not None or len(nexts) * n_actions > len(t)
+    if on_samples and isinstance(reg.features, OneHot):
+        # Indicator columns add exact zeros to the one weight they pick: no features to store.
+        phi_next: np.ndarray | _NextCells = _NextCells(reg.features.index(nexts))
+    else:
+        phi_next = reg.features(nexts)
     if prior is not None:
         # The residual's targets are y - prior(s, a); its bootstrap adds the prior back.
         prior_next = prior.values(nexts)
@@ -384,7 +389,7 @@ def _fqi_linear(
             )  # fmt: skip
         return ResidualQ(prior, LinearQ(reg.features, weights))
     next_values = q0.values(nexts)
-    iterate = _iterate_on_model if len(nexts) * n_actions <= len(t) else _iterate_on_samples
+    iterate = _iterate_on_samples if on_samples else _iterate_on_model
     # An iteration is a few memory-bound matrix-vector products: BLAS threads only add
     # synchronisation.
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
@@ -410,15 +415,26 @@ def _iterate_on_samples(
     prior_taken=None,
     prior_next=None,
 ) -> np.ndarray:
-    """FQI sample by sample: per iteration one pass over the next-state features and one
-    over the state features (both stored action-block-contiguous, transposed, so each
-    product is one BLAS call with a long inner dimension), in ``dtype``. With
+    """FQI sample by sample: per iteration one pass over the next-state features (on a
+    one-hot basis, a pick of weight columns: :class:`_NextCells`) and one over the state
+    features (both stored action-block-contiguous, transposed, so each product is one
+    BLAS call with a long inner dimension), in ``dtype``. With
     ``prior_taken`` (N,) and ``prior_next`` (V, A) the weights fit the residual from that prior."""
     order = np.argsort(t.actions, kind="stable")
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
     blocks = [slice(int(bounds[a]), int(bounds[a + 1])) for a in range(n_actions)]
     phi_t = _gathered_columns(phi_states, state_of[order], dtype)  # (k, N)
-    phi_next_t = _gathered_columns(phi_next, next_of[order], dtype)  # (k, N)
+    if isinstance(phi_next, _NextCells):
+        cells = phi_next.index[next_of[order]]
+
+        def next_pass(weights: np.ndarray) -> np.ndarray:
+            return weights[:, cells]
+    else:
+        phi_next_t = _gathered_columns(phi_next, next_of[order], dtype)  # (k, N)
+
+        def next_pass(weights: np.ndarray) -> np.ndarray:
+            return weights @ phi_next_t
+
     rewards = t.rewards[order]
     if prior_taken is not None:
         rewards = rewards - prior_taken[order]
@@ -432,10 +448,17 @@ def _iterate_on_samples(
         y = (rewards + continues * best_next).astype(dtype, copy=False)
         for a, block in enumerate(blocks):
             weights[a] = solve(a, (phi_t[:, block] @ y[block]).astype(np.float64, copy=False))
-        best_next = (
-            (weights.astype(dtype, copy=False) @ phi_next_t + offset_t).max(axis=0).astype(np.float64, copy=False)
-        )
+        best_next = (next_pass(weights.astype(dtype, copy=False)) + offset_t).max(axis=0).astype(np.float64, copy=False)
     return weights
+
+
+@dataclasses.dataclass(frozen=True)
+class _NextCells:
+    """Next states on a one-hot basis, as each one's indicator index: a weight row's
+    product with an indicator column is the weight it picks, bit for bit (the other
+    terms are exact zeros), as ``LinearQ.values`` reads it."""
+
+    index: np.ndarray
 
 
 def _gathered_columns(matrix: np.ndarray, rows: np.ndarray, dtype: type = np.float64, block: int = 256) -> np.ndarray:
