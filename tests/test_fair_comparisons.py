@@ -232,6 +232,19 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
     )
 
 
+@pytest.mark.parametrize(
+    ("name", "reaches"), [("ip_to_flipped_ip", False), ("mc_to_ip", False), ("ip_to_timevarying_ip", True)]
+)
+def test_which_pendulum_streams_come_near_upright(name, reaches):
+    """What docs/protocol.md says of the shared stream: from hanging, random actions do not
+    bring the flipped or the mountain car's pendulum within 0.5 rad of upright in 1,000
+    transitions, and they do bring the time-varying one there, on each of six seeds."""
+    target = spec_mod.load_spec(ROOT / "tasks" / f"{name}.toml").target
+    for seed in range(6):
+        states = pipeline.random_transitions(target, 1000, seed).states
+        assert np.any(np.abs(states[:, 0]) < 0.5) == reaches, seed
+
+
 def test_the_source_action_is_chosen_where_the_source_is_queried(flipped):
     spec, preset, artifacts = flipped
     problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
