@@ -344,3 +344,29 @@ def test_target_learners_take_a_precision_for_the_linear_regressor_only():
         RL(regressor="extra_trees", precision="single")
     # A spec's method table reaches the learner through the registry, as ridge does.
     assert registry.build("rl", {"precision": "single", "ridge": 1.0}).precision == "single"
+
+
+SWEEPS = sorted((ROOT / "tasks" / "sweeps").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SPECS + SWEEPS, ids=lambda p: p.stem)
+def test_a_specs_fqi_learners_share_one_precision_and_single_only_at_ridge_1(path):
+    learners = []
+    for name, table in spec_mod.load_spec(path).methods.items():
+        method = registry.build(name, table)
+        if getattr(method, "regressor", None) == "linear":
+            learners.append(method)
+    # Every FQI learner a method is compared with rounds its passes alike.
+    assert len({m.precision for m in learners}) <= 1
+    for method in learners:
+        if method.precision == "single":
+            # A fit moves by at most 1 / (2 sqrt(ridge)) times its targets' float32 rounding;
+            # near ridge 0 a fit with fewer samples than features amplifies it.
+            assert method.ridge >= 1.0, f"{path.stem}: {method.name} runs single precision at ridge {method.ridge}"
+
+
+def test_the_bicycles_fqi_learners_run_single_precision_passes():
+    for path in (ROOT / "tasks" / "cartpole_to_bicycle.toml", ROOT / "tasks" / "variants" / "cartpole_to_bicycle_affine.toml"):
+        methods = spec_mod.load_spec(path).methods
+        for name in ("rl", "uma-tl", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior", "apprentice-fqi"):
+            assert registry.build(name, methods[name]).precision == "single"
