@@ -366,7 +366,7 @@ def test_a_specs_fqi_learners_share_one_precision_and_single_only_at_ridge_1(pat
 
 
 def test_the_bicycles_fqi_learners_run_single_precision_passes():
-    for path in (ROOT / "tasks" / "cartpole_to_bicycle.toml", ROOT / "tasks" / "variants" / "cartpole_to_bicycle_affine.toml"):
-        methods = spec_mod.load_spec(path).methods
+    for spec in ("cartpole_to_bicycle.toml", "variants/cartpole_to_bicycle_affine.toml"):
+        methods = spec_mod.load_spec(ROOT / "tasks" / spec).methods
         for name in ("rl", "uma-tl", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior", "apprentice-fqi"):
             assert registry.build(name, methods[name]).precision == "single"
