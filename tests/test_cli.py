@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import platform
 import tomllib
 
 import imageio.v3 as iio
@@ -316,3 +317,36 @@ def test_seeds_default_to_the_presets_own_and_must_agree(tmp_path):
     table["presets"]["paper"]["first_seed"] = -1
     with pytest.raises(spec_mod.SpecError, match=r"key 'presets.paper.first_seed' must be an integer >= 0, got -1"):
         spec_mod.parse_spec(table, "mine.toml")
+
+
+def _default_blas_architecture() -> str | None:
+    import threadpoolctl
+
+    found = [i.get("architecture") for i in threadpoolctl.threadpool_info() if i["internal_api"] == "openblas"]
+    return found[0] if found else None
+
+
+@pytest.mark.skipif(
+    platform.machine() != "x86_64" or _default_blas_architecture() in (None, "Sandybridge"),
+    reason="needs x86-64 OpenBLAS whose own kernel is not Sandybridge, to force another one",
+)
+def test_a_run_resumed_under_other_kernels_records_both_and_says_so(tmp_path):
+    spec = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    first = tatl(
+        "run", str(spec), "--preset", "tiny", "--seeds", "1", "--methods", "rl", "--workers", "1", "--out", str(out),
+        env={"OPENBLAS_CORETYPE": "Sandybridge"},
+    )  # fmt: skip
+    assert first.returncode == 0, first.stderr
+    assert "arithmetic kernels" not in first.stdout
+    resumed = tatl("run", str(spec), "--preset", "tiny", "--seeds", "2", "--methods", "rl", "--out", str(out))
+    assert resumed.returncode == 0, resumed.stderr
+    records = out / "records" / "ip_to_flipped_ip"
+    for seed, kernel in ((0, "Sandybridge"), (1, _default_blas_architecture())):
+        for unit in ("source", "rl"):
+            *blas, simd = json.loads((records / f"seed{seed}" / f"{unit}.json").read_text())["kernels"].split("; ")
+            assert blas and all(k.startswith("openblas ") and k.endswith(f" {kernel}") for k in blas)
+            assert simd.startswith("numpy ")
+    counts = json.loads((out / "summary.json").read_text())["kernels"]
+    assert sorted(counts.values()) == [2, 2] and len(counts) == 2
+    assert "note: this run's records were computed with 2 sets of arithmetic kernels" in resumed.stdout

@@ -194,3 +194,13 @@ def test_survival_is_reported_only_where_an_early_end_is_a_fall():
     # Reaching the grid's goal ends an episode early: a success, not a fall.
     assert not summary._falls(spec("gridworld", "windy")) and not summary._falls(spec("pendulum", "swingup"))
     assert not summary._falls({"target": {"domain": "no_such_domain", "task": "x"}})
+
+
+def test_a_note_names_the_kernels_only_when_the_records_mix_them():
+    one = {"experiments": {}, "kernels": {"openblas 0.3.31 Haswell; numpy X86_V3": 12, "unknown": 3}}
+    assert summary.notes(one) == []  # older records without the field are not a second set
+    two = {"experiments": {}, "kernels": {"openblas 0.3.31 Haswell; numpy X86_V3": 12, "openblas 0.3.31 SkylakeX": 4}}
+    (line,) = summary.notes(two)
+    assert "2 sets of arithmetic kernels" in line
+    assert "[openblas 0.3.31 Haswell; numpy X86_V3]: 12 records" in line and "[openblas 0.3.31 SkylakeX]: 4" in line
+    assert summary.notes({"experiments": {}}) == []  # a summary written before the field

@@ -55,6 +55,26 @@ def one_thread() -> Iterator[None]:
         yield
 
 
+def kernels() -> str:
+    """The arithmetic kernels this process computes with: each BLAS library by version and
+    kernel, and numpy's SIMD targets, e.g. ``"openblas 0.3.31 Haswell; numpy X86_V3"``.
+
+    A record depends on them as on its seed: other kernels sum in another order, and the
+    same seeds then give other per-seed returns (docs/protocol.md, "Across machines").
+    """
+    import scipy.linalg  # noqa: F401 - loads scipy's own BLAS too, so every unit reports both
+
+    blas = sorted(
+        {
+            f"{info['internal_api']} {info.get('version') or '?'} {info.get('architecture') or '?'}"
+            for info in threadpoolctl.threadpool_info()
+            if info["user_api"] == "blas"
+        }
+    )
+    simd = np.show_config(mode="dicts").get("SIMD Extensions", {}).get("found") or ["baseline"]
+    return "; ".join([*blas, f"numpy {'+'.join(simd)}"])
+
+
 def derive_seed(seed: int, *names: str) -> int:
     """A stable 32-bit seed for (seed, names...), identical across processes and hosts."""
     words = [seed] + [zlib.crc32(name.encode()) for name in names]

@@ -131,6 +131,7 @@ def _work(
         artifacts = pickle.loads(source_blob)
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
+    record["kernels"] = pipeline.kernels()  # what it depends on besides its settings and seed
     record["wall_s"] = time.perf_counter() - start
     record["fqi_s"] = fqi.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
     # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
@@ -269,6 +270,21 @@ def _versions() -> dict:
         except metadata.PackageNotFoundError:
             out[name] = None
     return out
+
+
+def _kernel_counts(run_dir: RunDirectory, units: list[Unit]) -> dict[str, int]:
+    """How many of the run's records each set of arithmetic kernels computed (a run resumed
+    elsewhere, or a Ray cluster of unlike nodes, can mix them); ``"unknown"`` for records
+    older than the field."""
+    counts: dict[str, int] = {}
+    for unit in units:
+        path = run_dir.record_path(unit.experiment, unit.seed, unit.name)
+        try:
+            kernel = read_json(path).get("kernels", "unknown")
+        except (OSError, ValueError):
+            continue  # not finished: named among the failures
+        counts[kernel] = counts.get(kernel, 0) + 1
+    return counts
 
 
 def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSpec]) -> None:
@@ -558,6 +574,7 @@ def _run_locked(
         seeds=seeds,
         methods=method_names,
         versions=_versions(),
+        kernels=_kernel_counts(run_dir, all_units),
         wall_s=time.perf_counter() - start,
         workers=workers,
         executor=executor,

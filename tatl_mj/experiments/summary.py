@@ -410,8 +410,18 @@ STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met
 
 
 def notes(summary: dict) -> list[str]:
-    """One line per experiment where Algorithm 2's stopping rule was not met, saying what it means."""
+    """One line per experiment where Algorithm 2's stopping rule was not met, and one where
+    the run's records come from more than one set of arithmetic kernels, each saying what
+    it means."""
     lines = []
+    kernels = {k: n for k, n in (summary.get("kernels") or {}).items() if k != "unknown"}
+    if len(kernels) > 1:
+        counts = "; ".join(f"[{k}]: {n} records" for k, n in sorted(kernels.items()))
+        lines.append(
+            f"note: this run's records were computed with {len(kernels)} sets of arithmetic kernels ({counts}), "
+            "as when a run resumes on another machine: per-seed returns can differ between them, verdicts should "
+            'not; to rerun on one set, see docs/protocol.md, "Across machines"'
+        )
     for name, exp in summary["experiments"].items():
         unmet = exp.get("algorithm2_not_met") or {}
         if unmet:
