@@ -271,11 +271,30 @@ def test_run_recomputes_corrupt_records_and_caches(tmp_path):
     rl, blob = run_dir.record_path(spec.name, 0, "rl"), run_dir.blob_path(spec.name, 0)
     rl.write_text(rl.read_text()[:20])
     blob.write_bytes(blob.read_bytes()[:100])
+    litter = rl.with_name(".rl.json.0123abcd.tmp")  # what a write cut short by a crash leaves
+    litter.write_text('{"cur')
     summary = runner.run([spec], "tiny", [0], tmp_path, workers=1, methods=["rl"], progress=False)
     assert summary["failures"] == []
     assert summary["experiments"][spec.name]["methods"]["rl"]["seeds"] == [0]
     assert run_dir.is_done(spec.name, 0, "rl") and run_dir.is_done(spec.name, 0, "source")
     assert rl.with_name("rl.json.corrupt").exists() and blob.with_name("source.pkl.corrupt").exists()
+    assert not litter.exists()
+
+
+def test_a_run_stopped_inside_a_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    from tatl_mj.experiments import runner
+
+    def stopped_mid_write(specs, preset, seeds, run_dir, *rest):
+        tmp = run_dir.record_path(specs[0].name, 0, "rl").with_name(".rl.json.0123abcd.tmp")
+        tmp.parent.mkdir(parents=True)
+        tmp.write_text('{"cur')
+        raise KeyboardInterrupt  # as a stop signal's handler raises, before the write's own cleanup
+
+    monkeypatch.setattr(runner, "_run_locked", stopped_mid_write)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run([tiny_spec()], "tiny", [0], tmp_path, workers=1, methods=["rl"], progress=False)
+    assert not list(tmp_path.rglob("*.tmp"))
+    assert (tmp_path / "records").is_dir()
 
 
 # --- CLI input --------------------------------------------------------------------

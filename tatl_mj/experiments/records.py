@@ -163,6 +163,15 @@ class RunDirectory:
         """The source cache of (experiment, seed); call :meth:`is_done` for the source unit first."""
         return self.blob_path(experiment, seed).read_bytes()
 
+    def remove_temporaries(self) -> int:
+        """Removes the temporary files of writes cut short (by a stop signal, or a crash);
+        call only while holding the folder's lock. Returns how many it removed."""
+        removed = 0
+        for path in self.root.rglob(".*.tmp"):
+            path.unlink(missing_ok=True)
+            removed += 1
+        return removed
+
     @property
     def manifest(self) -> Path:
         return self.root / "run.json"

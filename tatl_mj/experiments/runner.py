@@ -487,7 +487,12 @@ def run(
     all_units, custom = _plan(specs, preset, seeds, methods)
     run_dir = RunDirectory(out)
     with lock.hold(run_dir.root):  # [robustness] one run per --out; raises lock.LockHeld
-        return _run_locked(specs, preset, seeds, run_dir, workers, executor, all_units, custom, progress, dispatch)
+        run_dir.remove_temporaries()  # a crashed run's half-written files
+        try:
+            return _run_locked(specs, preset, seeds, run_dir, workers, executor, all_units, custom, progress, dispatch)
+        finally:
+            # A stop signal raises from its handler, which can land inside a write's cleanup.
+            run_dir.remove_temporaries()
 
 
 def _run_locked(
