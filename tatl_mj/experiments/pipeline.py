@@ -26,7 +26,7 @@ import dataclasses
 import time
 import warnings
 import zlib
-from functools import partial
+from functools import cache, partial
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -55,6 +55,7 @@ def one_thread() -> Iterator[None]:
         yield
 
 
+@cache  # fixed for a process's life: the libraries choose their kernels when loaded
 def kernels() -> str:
     """The arithmetic kernels this process computes with: each BLAS library by version and
     kernel, and numpy's SIMD targets, e.g. ``"openblas 0.3.31 Haswell; numpy X86_V3"``.

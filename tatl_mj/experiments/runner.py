@@ -276,15 +276,13 @@ def _kernel_counts(run_dir: RunDirectory, units: list[Unit]) -> dict[str, int]:
     """How many of the run's records each set of arithmetic kernels computed (a run resumed
     elsewhere, or a Ray cluster of unlike nodes, can mix them); ``"unknown"`` for records
     older than the field."""
-    counts: dict[str, int] = {}
+    counts: collections.Counter[str] = collections.Counter()
     for unit in units:
-        path = run_dir.record_path(unit.experiment, unit.seed, unit.name)
         try:
-            kernel = read_json(path).get("kernels", "unknown")
+            counts[read_json(run_dir.record_path(unit.experiment, unit.seed, unit.name)).get("kernels", "unknown")] += 1
         except (OSError, ValueError):
             continue  # not finished: named among the failures
-        counts[kernel] = counts.get(kernel, 0) + 1
-    return counts
+    return dict(counts)
 
 
 def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSpec]) -> None:
