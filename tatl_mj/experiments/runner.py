@@ -38,13 +38,12 @@ from tatl_mj import sampling
 from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
-from tatl_mj.experiments.records import RunDirectory, read_json, write_atomic, write_json
+from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
 from tatl_mj.transfer import fqi, registry
 from tatl_mj.transfer.method import TransferMethod, contract
 
 EXECUTORS = ("local", "ray")
-SOURCE_UNIT = "source"
 
 
 class MethodError(ValueError):
@@ -274,14 +273,15 @@ def _versions() -> dict:
 
 def _kernel_counts(run_dir: RunDirectory, units: list[Unit]) -> dict[str, int]:
     """How many of the run's records each set of arithmetic kernels computed (a run resumed
-    elsewhere, or a Ray cluster of unlike nodes, can mix them); ``"unknown"`` for records
-    older than the field."""
+    elsewhere, or a Ray cluster of unlike nodes, can mix them); records older than the
+    field count as :data:`summary.UNKNOWN_KERNELS`."""
     counts: collections.Counter[str] = collections.Counter()
     for unit in units:
         try:
-            counts[read_json(run_dir.record_path(unit.experiment, unit.seed, unit.name)).get("kernels", "unknown")] += 1
+            record = read_json(run_dir.record_path(unit.experiment, unit.seed, unit.name))
         except (OSError, ValueError):
             continue  # not finished: named among the failures
+        counts[record.get("kernels", summary_mod.UNKNOWN_KERNELS)] += 1
     return dict(counts)
 
 

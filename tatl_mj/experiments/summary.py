@@ -406,7 +406,13 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
 
 
 AUC_POINTS = 256
+UNKNOWN_KERNELS = "unknown"  # the kernels of records older than their "kernels" field
 STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met warning
+
+
+def known_kernels(summary: dict) -> dict[str, int]:
+    """The run's sets of arithmetic kernels with their record counts, but records older than the field."""
+    return {k: n for k, n in (summary.get("kernels") or {}).items() if k != UNKNOWN_KERNELS}
 
 
 def notes(summary: dict) -> list[str]:
@@ -414,7 +420,7 @@ def notes(summary: dict) -> list[str]:
     the run's records come from more than one set of arithmetic kernels, each saying what
     it means."""
     lines = []
-    kernels = {k: n for k, n in (summary.get("kernels") or {}).items() if k != "unknown"}
+    kernels = known_kernels(summary)
     if len(kernels) > 1:
         counts = "; ".join(f"[{k}]: {n} records" for k, n in sorted(kernels.items()))
         lines.append(
