@@ -206,3 +206,23 @@ def test_interval_figure_draws_iqm_bands_and_the_probability_of_improvement(tmp_
     assert segment.get_segments()[0][:, 0].tolist() == [0.7, 1.0]
     assert [t.get_text() for t in improvement.texts] == ["credited"]
     assert improvement.get_yticklabels()[0].get_text() == "ta-tl > apprentice-fqi\n(its ablation)"
+
+
+def test_the_preamble_names_the_kernels_that_computed_the_records():
+    reach = {"ta-tl": [100, 100, 100], "rl": [1000, 1000, 1000]}
+    preamble = plot.table(summary(reach)).split("\n\n")[0]
+    assert "Arithmetic kernels" not in preamble  # a summary written before the field
+
+    one = summary(reach) | {"kernels": {"openblas 0.3.31 SkylakeX; numpy X86_V4": 1030}}
+    preamble = plot.table(one).split("\n\n")[0]
+    assert preamble.endswith(
+        "Arithmetic kernels: `openblas 0.3.31 SkylakeX; numpy X86_V4` (1,030 records). Per-seed returns "
+        'depend on them, verdicts should not (docs/protocol.md, "Across machines").'
+    )
+
+    mixed = summary(reach) | {"kernels": {"openblas 0.3.31 SkylakeX": 4, "openblas 0.3.31 Haswell": 12, "unknown": 3}}
+    preamble = plot.table(mixed).split("\n\n")[0]
+    assert (
+        "Arithmetic kernels: `openblas 0.3.31 Haswell` (12 records), `openblas 0.3.31 SkylakeX` (4 records); "
+        "3 older records do not name theirs." in preamble
+    )

@@ -40,6 +40,7 @@ from tatl_mj.experiments.summary import (
     ablation_pairs,
     ablation_verdict,
     compare,
+    known_kernels,
 )
 
 COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
@@ -168,6 +169,22 @@ def _table_preamble(summary: dict) -> str:
         "`shared`, the random-policy stream every method shares; `reset`, one-step transitions from states "
         "spread over the target's box (privileged: a simulator reset a robot lacks); `online`, "
         "epsilon-greedy episodes from the task's own starts; `stream`/`source-policy`, the planner's."
+        + _kernels_sentence(summary)
+    )
+
+
+def _kernels_sentence(summary: dict) -> str:
+    """Which arithmetic kernels computed the records (per-seed returns depend on them), so a
+    table copied elsewhere still says what produced it; empty when no record names them."""
+    known = known_kernels(summary)
+    if not known:
+        return ""
+    older = sum((summary.get("kernels") or {}).values()) - sum(known.values())
+    sets = ", ".join(f"`{k}` ({n:,} records)" for k, n in sorted(known.items()))
+    rest = f"; {older:,} older records do not name theirs" if older else ""
+    return (
+        f" Arithmetic kernels: {sets}{rest}. Per-seed returns depend on them, verdicts should not "
+        '(docs/protocol.md, "Across machines").'
     )
 
 
