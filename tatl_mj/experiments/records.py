@@ -28,6 +28,7 @@ SOURCE_UNIT = "source"
 # Keys a finished record must have, by unit kind (see runner.work).
 SOURCE_KEYS = ("random_return",)
 METHOD_KEYS = ("curve", "final_return")
+TEMPORARY = ".{name}.{tag}.tmp"  # where write_atomic writes before its rename
 
 
 class RecordError(ValueError):
@@ -38,7 +39,7 @@ def write_atomic(path: Path, data: bytes) -> None:
     """Writes ``data`` to ``path`` so that readers see the old file or the whole new one."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # os.open with 0o666 honours the user's umask (mkstemp would always give 0600).
-    tmp = str(path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp")
+    tmp = str(path.parent / TEMPORARY.format(name=path.name, tag=uuid.uuid4().hex))
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "wb") as handle:
@@ -167,7 +168,7 @@ class RunDirectory:
         """Removes the temporary files of writes cut short (by a stop signal, or a crash);
         call only while holding the folder's lock. Returns how many it removed."""
         removed = 0
-        for path in self.root.rglob(".*.tmp"):
+        for path in self.root.rglob(TEMPORARY.format(name="*", tag="*")):
             path.unlink(missing_ok=True)
             removed += 1
         return removed
