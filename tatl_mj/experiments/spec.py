@@ -156,6 +156,14 @@ class ExperimentSpec:
     # same source data, target samples and evaluation starts (a paired comparison), and
     # their methods without a source are computed once (``tatl_mj.experiments.runner``).
     streams: str = ""
+    # The strongest baseline per verdict question ({"final": NAME, "efficiency": NAME}),
+    # chosen on the tuning seeds and frozen here (``verdicts.choose_best_baseline``): every
+    # method that is not a baseline is compared with it, whichever seeds are reported.
+    best_baseline: dict = dataclasses.field(default_factory=dict)
+    # What the paper reports for this experiment, for the paper-vs-here table
+    # (``tables.paper_table``): ``section`` (where in the paper) and ``numbers`` (its
+    # figures, as text). Empty for the variants and sweeps, which the paper does not have.
+    paper: dict = dataclasses.field(default_factory=dict)
 
     def preset(self, name: str) -> Preset:
         if name not in self.presets:
@@ -371,6 +379,12 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
     for name, settings in spec.methods.items():
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
+        for key in registry.PAIR_KEYS:
+            other = settings.get(key)
+            if key in settings and (not isinstance(other, str) or other not in spec.methods or other == name):
+                _fail(
+                    p, f"methods.{name}.{key}", f"the name of another method of this spec {sorted(spec.methods)}", other
+                )
         try:
             from tatl_mj.transfer.method import contract
 
@@ -379,6 +393,16 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
                 check(source, target)
         except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
+    for key, value in spec.paper.items():
+        if key not in ("section", "numbers"):
+            raise SpecError(f"{p}: unknown key 'paper.{key}'; valid keys: ['numbers', 'section']")
+        if not isinstance(value, str):
+            _fail(p, f"paper.{key}", "a string", value)
+    for question, baseline in spec.best_baseline.items():
+        if question not in ("final", "efficiency"):
+            raise SpecError(f"{p}: unknown key 'best_baseline.{question}'; valid keys: ['efficiency', 'final']")
+        if baseline not in spec.methods:
+            _fail(p, f"best_baseline.{question}", f"a method of this spec {sorted(spec.methods)}", baseline)
 
 
 def _check_sweep(spec: ExperimentSpec) -> None:
@@ -501,7 +525,7 @@ def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
     if name in registry.METHODS:
         raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
     obj = plugins.load(path, "method")
-    kwargs = {k: _tuples(v) for k, v in settings.items() if k != registry.VARIANT_KEY}
+    kwargs = {k: _tuples(v) for k, v in settings.items() if k not in (registry.VARIANT_KEY, *registry.PAIR_KEYS)}
     if isinstance(obj, type):
         try:
             parameters = inspect.signature(obj).parameters
