@@ -10,8 +10,9 @@ from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import make_features
-from tatl_mj.transfer.fqi import LinearQ, TabularQ, TreeQ
+from tatl_mj.transfer.fqi import LinearQ, TreeQ
 from tatl_mj.transfer.placebo import placebo_q
+from tatl_mj.transfer.tabular_q import TabularQ
 
 
 def _trained() -> LinearQ:

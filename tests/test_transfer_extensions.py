@@ -8,12 +8,12 @@ from test_transfer_tabular import GAMMA, one_visit_per_pair
 from tatl_mj import suite
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.alignment import IdentityMapping
-from tatl_mj.transfer.fqi import q_iteration
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.methods.horizon import HorizonTATL, HorizonTATLPolicy
 from tatl_mj.transfer.methods.projected import ProjectedSource
 from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanPolicy, ReplanTATL
 from tatl_mj.transfer.methods.tatl import TATL
+from tatl_mj.transfer.tabular_q import q_iteration
 
 
 def test_horizon_method_with_one_step_is_the_papers_rule():

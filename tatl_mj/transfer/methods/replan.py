@@ -18,7 +18,7 @@ import numpy as np
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import as_states
-from tatl_mj.transfer.fqi import QFunction, TabularQ
+from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.tabular import (
     PRIOR_SCOPES,
@@ -28,6 +28,7 @@ from tatl_mj.transfer.tabular import (
     mapped_model,
     uninformed_model,
 )
+from tatl_mj.transfer.tabular_q import TabularQ
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import choice, number
