@@ -53,7 +53,7 @@ def test_placebo_of_an_unsupported_source_names_what_works():
 def test_placebo_setting_is_checked_at_construction():
     assert registry.build("ta-tl-placebo", {"method": "ta-tl", "source": "placebo"}).source == "placebo"
     assert registry.build("uma-tl-placebo", {"method": "uma-tl", "source": "placebo"}).source == "placebo"
-    with pytest.raises(ValueError, match=r"TATL.source is 'random'; valid choices: \['trained', 'placebo'\]"):
+    with pytest.raises(ValueError, match=r"TATL.source must be one of \['trained', 'placebo'\], got 'random'"):
         registry.build("ta-tl-x", {"method": "ta-tl", "source": "random"})
     with pytest.raises(ValueError, match="needs a learner that uses the source Q; RL uses none"):
         registry.build("rl-x", {"method": "rl", "source": "placebo"})

@@ -358,7 +358,7 @@ def test_single_precision_passes_stay_within_float32_rounding_of_double():
 
 def test_precision_is_checked_where_it_is_set():
     basis = LinearFeatures()
-    message = r"LinearRegressor\.precision is 'half'; valid choices: \['double', 'single'\]"
+    message = r"LinearRegressor\.precision must be one of \['double', 'single'\], got 'half'"
     with pytest.raises(ValueError, match=message):
         LinearRegressor(basis, 1.0, "half")
     spec = {"kind": "linear", "features": {"kind": "linear"}, "precision": "single"}

@@ -41,7 +41,7 @@ from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
 from tatl_mj.transfer import fit_time, registry
-from tatl_mj.transfer.method import TransferMethod, contract
+from tatl_mj.transfer.method import contract
 
 EXECUTORS = ("local", "ray")
 
@@ -312,10 +312,8 @@ def _plan(
     the spec's settings where it has them); a dict: name -> method object (None
     for such a built-in).
     """
-    custom = {k: v for k, v in methods.items() if v is not None} if isinstance(methods, dict) else {}
-    for name, obj in custom.items():
-        if not isinstance(obj, TransferMethod):
-            raise ValueError(f"method {name!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+    given = methods.items() if isinstance(methods, dict) else []
+    custom = {k: registry.resolve(v, label=k) for k, v in given if v is not None}
     units = []
     for spec in specs:
         names = list(spec.methods) if methods is None else list(methods)
