@@ -14,7 +14,7 @@ from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.transfer import registry
+from tatl_mj.transfer import registry, roles
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
@@ -163,11 +163,11 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
         assert point["target_transitions"] == point["samples_used"] + rollout
         assert point["rollout_transitions"] == rollout  # the paper does not count these
     # Algorithm 2's k trials as a setting: one episode of U_M charges one episode's steps.
-    one = spec_mod.build_method("ta-tl-k1", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 1})
+    one = registry.resolve("ta-tl-k1", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 1})
     record = pipeline.run_method(spec, preset, 0, "ta-tl-k1", artifacts, transfer=one)
     assert {p["rollout_transitions"] for p in record["curve"]} == {preset.evaluation_steps}
     # zeta = "none" in a spec: Algorithm 2 off, every sample used, nothing rolled out.
-    off = spec_mod.build_method("ta-tl-all", {"method": "ta-tl", "zeta": "none"})
+    off = registry.resolve("ta-tl-all", {"method": "ta-tl", "zeta": "none"})
     assert off.zeta is None
     record = pipeline.run_method(spec, preset, 0, "ta-tl-all", artifacts, transfer=off)
     assert [p["samples_used"] for p in record["curve"]] == list(preset.target_budgets)
@@ -298,8 +298,8 @@ def test_new_methods_are_registered_and_source_free_where_they_say():
     for name in ("apprentice-fqi", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior"):
         assert registry.build(name).name == name
     assert registry.build("rl-online").data == "online" and registry.build("uma-tl-reset").data == "reset"
-    assert "apprentice-fqi" in registry.SOURCE_FREE and "uma-tl-prior" not in registry.SOURCE_FREE
-    with pytest.raises(ValueError, match=r"RL.data is 'replay'; valid choices: \['shared', 'reset', 'online'\]"):
+    assert "apprentice-fqi" in roles.SOURCE_FREE and "uma-tl-prior" not in roles.SOURCE_FREE
+    with pytest.raises(ValueError, match=r"RL.data must be one of \['shared', 'reset', 'online'\], got 'replay'"):
         RL(data="replay")
 
 
@@ -354,7 +354,7 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
 def test_target_learners_take_a_precision_for_the_linear_regressor_only():
     assert RL(precision="single").regressor_spec()["precision"] == "single"
     assert "precision" not in RL().regressor_spec()  # double, the regressor's default
-    with pytest.raises(ValueError, match=r"RL\.precision is 'half'; valid choices: \['double', 'single'\]"):
+    with pytest.raises(ValueError, match=r"RL\.precision must be one of \['double', 'single'\] or None .*, got 'half'"):
         RL(precision="half")
     with pytest.raises(ValueError, match=r"RL\.precision applies to regressor 'linear' only"):
         RL(regressor="extra_trees", precision="single")

@@ -10,8 +10,9 @@ from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import make_features
-from tatl_mj.transfer.fqi import LinearQ, TabularQ, TreeQ
+from tatl_mj.transfer.fqi import LinearQ, TreeQ
 from tatl_mj.transfer.placebo import placebo_q
+from tatl_mj.transfer.tabular_q import TabularQ
 
 
 def _trained() -> LinearQ:
@@ -52,7 +53,7 @@ def test_placebo_of_an_unsupported_source_names_what_works():
 def test_placebo_setting_is_checked_at_construction():
     assert registry.build("ta-tl-placebo", {"method": "ta-tl", "source": "placebo"}).source == "placebo"
     assert registry.build("uma-tl-placebo", {"method": "uma-tl", "source": "placebo"}).source == "placebo"
-    with pytest.raises(ValueError, match=r"TATL.source is 'random'; valid choices: \['trained', 'placebo'\]"):
+    with pytest.raises(ValueError, match=r"TATL.source must be one of \['trained', 'placebo'\], got 'random'"):
         registry.build("ta-tl-x", {"method": "ta-tl", "source": "random"})
     with pytest.raises(ValueError, match="needs a learner that uses the source Q; RL uses none"):
         registry.build("rl-x", {"method": "rl", "source": "placebo"})

@@ -36,7 +36,7 @@ from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import mappings
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import apprentice, fqi, method
+from tatl_mj.transfer import apprentice, fqi, method, tabular_q
 from tatl_mj.transfer.methods import horizon
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
@@ -222,7 +222,7 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     if learner.method == "q_iteration":  # exact, on the task's known model (checked at spec load)
         assert source.known_model is not None
         next_state, reward, absorbing, cells = source.known_model()
-        return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
+        return tabular_q.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     n_actions = source.n_actions
     data = random_transitions(spec.source, preset.source_samples, derive_seed(seed, spec.stream_name, "source-data"))
     regressor = fqi.make_regressor(

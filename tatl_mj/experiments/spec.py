@@ -2,7 +2,7 @@
 
 A spec names the source and target tasks, how the source policy is learned,
 the inter-task mapping, the transfer methods to compare with their settings
-(``[methods.NAME]`` tables, built by ``tatl_mj.transfer.registry``), and named
+(``[methods.NAME]`` tables, built by ``tatl_mj.transfer.registry.resolve``), and named
 presets of sample budgets and evaluation protocol. Validation calls the same
 factories the workers use (``suite.describe``, ``make_regressor``, the method
 constructors), so any unknown key (feature tables included), wrong type,
@@ -12,7 +12,7 @@ naming the file, the key path and what was expected. See ``tasks/*.toml``.
 A user's own code is named by import path, ``"module:attribute"``, and imported
 wherever the spec is used (here and in every worker): a side's ``domain``
 (``tatl_mj.suite.domain``), and a ``[methods.NAME]`` table's ``method`` key, a
-class built with the table's other settings (:func:`build_method`).
+class built with the table's other settings (``tatl_mj.transfer.registry.resolve``).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ import typing
 from pathlib import Path
 from typing import Any
 
+from tatl_mj.transfer import registry, roles
+from tatl_mj.transfer.method import contract
 from tatl_mj.validation import is_integer, is_number
 
 SAMPLING_KINDS = ("episodes", "uniform")
@@ -371,24 +373,20 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
 
 
 def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
-    from tatl_mj.transfer import registry
-
     p = spec.path
     if not spec.methods:
         raise SpecError(f"{p}: at least one [methods.NAME] table is required; valid names: {sorted(registry.METHODS)}")
     for name, settings in spec.methods.items():
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
-        for key in registry.PAIR_KEYS:
+        for key in roles.PAIR_KEYS:
             other = settings.get(key)
             if key in settings and (not isinstance(other, str) or other not in spec.methods or other == name):
                 _fail(
                     p, f"methods.{name}.{key}", f"the name of another method of this spec {sorted(spec.methods)}", other
                 )
         try:
-            from tatl_mj.transfer.method import contract
-
-            check = contract(build_method(name, settings)).check
+            check = contract(registry.resolve(name, settings)).check
             if check is not None:
                 check(source, target)
         except (TypeError, ValueError) as error:
@@ -473,78 +471,18 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     it unset, is the preset's smallest target budget; a model-based learner's
     ``model_samples``, likewise, is the preset's where it sets one.
     """
-    from tatl_mj.transfer import registry
-
     chosen = list(spec.methods) if names is None else names
     out = {}
     for name in chosen:
         settings = dict(spec.methods.get(name, {}))
-        if plugin_path(settings) is None:
-            known = registry.settings_of(registry.base_of(name, settings))
+        if roles.plugin_path(settings) is None:
+            known = registry.settings_of(roles.base_of(name, settings))
             if "batch" in known and settings.get("batch") is None:
                 settings["batch"] = min(preset.target_budgets)
             if "model_samples" in known and "model_samples" not in settings and preset.model_samples is not None:
                 settings["model_samples"] = preset.model_samples
-        out[name] = build_method(name, settings)
+        out[name] = registry.resolve(name, settings)
     return out
-
-
-def plugin_path(settings: dict[str, Any]) -> str | None:
-    """The ``module:attribute`` a ``[methods.NAME]`` table's ``method`` key names, or None
-    (a built-in or a variant of one)."""
-    from tatl_mj.transfer import registry
-
-    base = settings.get(registry.VARIANT_KEY)
-    return base if isinstance(base, str) and ":" in base else None
-
-
-def _tuples(value: Any) -> Any:
-    """TOML arrays as tuples (method settings are frozen), tables left as dicts."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
-
-
-def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
-    """The method a ``[methods.NAME]`` table builds; ValueError (one line) if it cannot.
-
-    ``method = "module:attribute"`` names a user's own method: a class is called with
-    the table's other settings as keyword arguments (and ``name=NAME`` where its
-    constructor takes a ``name``); an instance takes no settings. It is imported in
-    the process that builds it, so each worker imports it too. Anything else is a
-    built-in or a variant of one (``tatl_mj.transfer.registry.build``).
-    """
-    import inspect
-
-    from tatl_mj import plugins
-    from tatl_mj.transfer import registry
-    from tatl_mj.transfer.method import TransferMethod
-
-    settings = dict(settings or {})
-    path = plugin_path(settings)
-    if path is None:
-        return registry.build(name, settings)
-    if name in registry.METHODS:
-        raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
-    obj = plugins.load(path, "method")
-    kwargs = {k: _tuples(v) for k, v in settings.items() if k not in (registry.VARIANT_KEY, *registry.PAIR_KEYS)}
-    if isinstance(obj, type):
-        try:
-            parameters = inspect.signature(obj).parameters
-        except (TypeError, ValueError):
-            parameters = {}
-        takes_any = any(p.kind is p.VAR_KEYWORD for p in parameters.values())
-        if "name" in kwargs:
-            raise ValueError(f"method {path!r}: 'name' is the table's name ({name!r}), not a setting")
-        if "name" in parameters or takes_any:
-            kwargs["name"] = name
-        try:
-            obj = obj(**kwargs)
-        except TypeError as error:
-            raise ValueError(f"method {path!r}: {path.partition(':')[2]}(**settings) failed: {error}") from None
-    elif kwargs:
-        raise ValueError(f"method {path!r} is an instance, not a class: it takes no settings, got {sorted(kwargs)}")
-    if not isinstance(obj, TransferMethod):
-        raise ValueError(f"method {path!r} is not a TransferMethod (needs a name and learn(problem, samples))")
-    return obj
 
 
 def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:

@@ -6,7 +6,7 @@ itself on a **placebo** source, or any method against the experiment's frozen **
 The pairs are declared by the spec, not by which methods a run happens to hold:
 
 - ablation: a method table's ``ablation = "NAME"`` key, else the built-in pairing
-  (``registry.ABLATION_OF``: the first of its built-in's ablations the spec lists);
+  (``roles.ABLATION_OF``: the first of its built-in's ablations the spec lists);
 - placebo: a method table's ``placebo = "NAME"`` key, else the table of the same built-in
   with ``source = "placebo"`` and otherwise the same settings;
 - best baseline: the spec's ``best_baseline = {final = "...", efficiency = "..."}``, chosen on
@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from tatl_mj.experiments import statistics as stats
+from tatl_mj.transfer import roles
 
 VERDICT_RULE_VERSION = 2
 """Bumped whenever a change to this rule can move a verdict (written into summary.json).
@@ -69,10 +70,8 @@ class Pair:
 
 
 def _base(name: str, settings: Mapping[str, Any] | None) -> str | None:
-    from tatl_mj.transfer import registry
-
     try:
-        return registry.base_of(name, dict(settings or {}))
+        return roles.base_of(name, dict(settings or {}))
     except ValueError:
         return None
 
@@ -81,13 +80,11 @@ def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
     """(transfer method, its source-free ablation) for every such pair a spec declares.
 
     A table's ``ablation`` key names it; otherwise pairs go by built-in
-    (``registry.ABLATION_OF``), so a variant (``method = "ta-tl"``) pairs with the
+    (``roles.ABLATION_OF``), so a variant (``method = "ta-tl"``) pairs with the
     ablation of its built-in: of the ablations a built-in names, the first the spec
     lists (the built-in's own table, else each variant of it). A placebo is itself an
     ablation, judged against its trained method only.
     """
-    from tatl_mj.transfer import registry
-
     bases = {name: _base(name, settings) for name, settings in spec_methods.items()}
     pairs = []
     for name, b in bases.items():
@@ -97,7 +94,7 @@ def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
             continue
         if settings.get("source") == "placebo":
             continue
-        for wanted in registry.ABLATION_OF.get(b or "", ()):
+        for wanted in roles.ABLATION_OF.get(b or "", ()):
             # The built-in itself where the spec lists it, else every variant of it.
             found = [wanted] if wanted in bases else [other for other, ob in bases.items() if ob == wanted]
             if found:
@@ -110,9 +107,7 @@ def placebo_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
     """(transfer method, the same method on a placebo source) for every such pair a spec declares:
     a table's ``placebo`` key, else the table with ``source = "placebo"`` of the same built-in
     whose settings are otherwise the same."""
-    from tatl_mj.transfer import registry
-
-    ignored = (registry.VARIANT_KEY, "source", *registry.PAIR_KEYS)
+    ignored = (roles.VARIANT_KEY, "source", *roles.PAIR_KEYS)
 
     def key(name: str) -> tuple[str, list] | None:
         settings = dict(spec_methods.get(name) or {})
@@ -135,17 +130,15 @@ def placebo_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
 def best_baseline_pairs(spec_methods: Mapping[str, Any], best: Mapping[str, str]) -> list[Pair]:
     """Every listed method that is not a baseline against the frozen best baseline, one pair per
     baseline named (both questions when one baseline was chosen for both)."""
-    from tatl_mj.transfer import registry
-
     by_baseline: dict[str, list[str]] = {}
     for question in QUESTIONS:
         if best.get(question):
             by_baseline.setdefault(best[question], []).append(question)
-    baselines = set(registry.BASELINES) | set(best.values())
+    baselines = set(roles.BASELINES) | set(best.values())
     pairs = []
     for baseline, questions in by_baseline.items():
         for name, settings in spec_methods.items():
-            if name in baselines or _base(name, settings) in registry.BASELINES:
+            if name in baselines or _base(name, settings) in roles.BASELINES:
                 continue
             pairs.append(Pair(name, baseline, BEST_BASELINE, tuple(questions)))
     return pairs
@@ -160,10 +153,8 @@ def declared_pairs(spec: Mapping[str, Any]) -> list[Pair]:
 
 
 def source_free(name: str, settings: Mapping[str, Any] | None) -> bool:
-    """Whether a spec's method reads no source (a built-in of ``registry.SOURCE_FREE``)."""
-    from tatl_mj.transfer import registry
-
-    return _base(name, settings) in registry.SOURCE_FREE
+    """Whether a spec's method reads no source (a built-in of ``roles.SOURCE_FREE``)."""
+    return _base(name, settings) in roles.SOURCE_FREE
 
 
 def parents_pair(spec: Mapping[str, Any], pair: Pair) -> bool:

@@ -8,20 +8,12 @@ Pure numpy / scipy / scikit-learn: nothing here imports mujoco or a suite domain
 from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping, LinearAlignment, Mapping, align_manifolds
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
 from tatl_mj.transfer.features import RBF, Features, LinearFeatures, OneHot, make_features
-from tatl_mj.transfer.fqi import (
-    ExtraTrees,
-    LinearQ,
-    LinearRegressor,
-    QFunction,
-    TabularQ,
-    fitted_q_iteration,
-    make_regressor,
-    q_iteration,
-)
+from tatl_mj.transfer.fqi import ExtraTrees, LinearQ, LinearRegressor, QFunction, fitted_q_iteration, make_regressor
 from tatl_mj.transfer.method import Policy, TransferMethod, TransferProblem
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, TargetFQI
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.registry import METHODS
+from tatl_mj.transfer.tabular_q import TabularQ, q_iteration
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy, TATLStep
 
 __all__ = [

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
@@ -49,7 +49,7 @@ from sklearn import neighbors
 
 from tatl_mj.transfer.features import as_states, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import integer, number
+from tatl_mj.validation import Boolean, Constraints, Interval, ListOf, check_settings, integer
 
 
 @runtime_checkable
@@ -395,16 +395,16 @@ class TransitionAlignment:
     rates: tuple[float, ...] = tuple(float(r) for r in np.geomspace(0.125, 8.0, 13))
     sign_flips: bool = True
 
+    constraints: ClassVar[Constraints] = {
+        "n_neighbors": [Interval(int, 2)],
+        "mu": [Interval(float, 0, closed="right")],
+        "max_samples": [Interval(int, 10)],
+        "rates": [ListOf(Interval(float, 0, closed="right"), nonempty=True)],
+        "sign_flips": [Boolean()],
+    }
+
     def __post_init__(self) -> None:
-        integer("TransitionAlignment", "n_neighbors", self.n_neighbors, 2)
-        integer("TransitionAlignment", "max_samples", self.max_samples, 10)
-        number("TransitionAlignment", "mu", self.mu, 0.0, low_open=True)
-        rates = np.asarray(self.rates, dtype=np.float64).ravel() if np.ndim(self.rates) in (0, 1) else None
-        if rates is None or len(rates) == 0 or not np.all(np.isfinite(rates) & (rates > 0)):
-            raise ValueError(f"TransitionAlignment.rates must be a non-empty list of numbers > 0, got {self.rates!r}")
-        if not isinstance(self.sign_flips, bool):
-            raise ValueError(f"TransitionAlignment.sign_flips must be true or false, got {self.sign_flips!r}")
-        object.__setattr__(self, "rates", tuple(rates.tolist()))
+        check_settings(self)
 
     @staticmethod
     def from_dict(table: dict[str, Any]) -> "TransitionAlignment":

@@ -27,7 +27,6 @@ import numpy as np
 from tatl_mj.description import TaskDescription
 from tatl_mj.policy import StatePolicy
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.features import make_features
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
@@ -204,6 +203,13 @@ class TransferMethod(Protocol):
       ``tatl run`` computes it once (default True);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n).
+
+    A method class declares what each of its settings admits in a class-level table,
+    ``constraints`` (``tatl_mj.validation``; the built-ins' in their modules): a spec's
+    settings are checked and converted against it before the class is called
+    (:func:`tatl_mj.transfer.registry.resolve`), and a class that calls
+    ``validation.check_settings(self)`` in ``__post_init__`` is checked when built
+    in Python too.
     """
 
     name: str
@@ -263,25 +269,6 @@ def samples_used(policy: Any, budget: int) -> int:
     return int(budget) if reported is None else int(reported)
 
 
-def check_features(owner: str, field: str, spec: Any, state_dim: int | None = None) -> None:
-    """A basis spec's keys and kind are valid (and, given ``state_dim``, its sizes)."""
-    try:
-        make_features(spec, state_dim if state_dim is not None else _probe_dim(spec))
-    except ValueError as error:
-        raise ValueError(f"{owner}.{field}: {error}") from None
-
-
-def _probe_dim(spec: Any) -> int:
-    """A state size that a basis spec can be built with, to check its keys before the task is known."""
-    if isinstance(spec, dict):
-        for key in ("low", "periodic"):
-            if isinstance(spec.get(key), (list, tuple)):
-                return len(spec[key])
-        if spec.get("kind") == "onehot":
-            return 2
-    return 1
-
-
 __all__ = [
     "Contract",
     "Model",
@@ -290,7 +277,6 @@ __all__ = [
     "TransferMethod",
     "TransferProblem",
     "Withheld",
-    "check_features",
     "contract",
     "samples_used",
 ]

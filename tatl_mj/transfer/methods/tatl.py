@@ -9,17 +9,18 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import ClassVar
 
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
-from tatl_mj.transfer.features import Features, make_features
-from tatl_mj.transfer.method import Policy, TransferProblem, check_features
+from tatl_mj.transfer.features import Features, FeaturesSpec, check_features, make_features
+from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import choice, integer, number
+from tatl_mj.validation import Constraints, Interval, InvalidSetting, ListOf, Options, check_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,30 +60,26 @@ class TATL:
     source: str = "trained"
     name: str = "ta-tl"
 
-    GAPS = ("absolute", "relative")
-    ACTION_SETS = ("discrete", "continuous")
+    constraints: ClassVar[Constraints] = {
+        "apprentice": [FeaturesSpec()],
+        "ridge": [Interval(float, 0)],
+        "zeta": [None, Interval(float, 0, closed="right")],
+        "gap": [Options("absolute", "relative")],
+        "batch": [None, Interval(int, 1)],
+        "utility_episodes": [None, Interval(int, 1)],
+        "actions": [Options("discrete", "continuous")],
+        "adaptive_actions": [ListOf(Interval(float))],
+        "source": [Options(*SOURCES)],
+    }
 
     def __post_init__(self) -> None:
-        owner = type(self).__name__
-        check_features(owner, "apprentice", self.apprentice)
-        choice(owner, "gap", self.gap, self.GAPS)
-        choice(owner, "actions", self.actions, self.ACTION_SETS)
-        choice(owner, "source", self.source, SOURCES)
-        number(owner, "ridge", self.ridge, 0.0)
-        if self.zeta is not None:
-            number(owner, "zeta", self.zeta, 0.0, low_open=True)
-        if self.batch is not None:
-            integer(owner, "batch", self.batch, 1)
-        if self.utility_episodes is not None:
-            integer(owner, "utility_episodes", self.utility_episodes, 1)
-        for i, value in enumerate(self.adaptive_actions):
-            number(owner, f"adaptive_actions[{i}]", value)
+        check_settings(self)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         """Settings that need the tasks' descriptions (basis size, actuator)."""
         check_features(type(self).__name__, "apprentice", self.apprentice, target.state_dim)
         if self.adaptive_actions and target.discrete:
-            raise ValueError(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
+            raise InvalidSetting(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
 
     def features(self, target: TaskDescription) -> Features:
         return make_features(self.apprentice, target.state_dim)
