@@ -45,7 +45,6 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 from scipy.spatial import distance
-from sklearn import neighbors
 
 from tatl_mj.transfer.features import as_states, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
@@ -178,6 +177,8 @@ def _standardiser(x: np.ndarray, name: str, whiten: bool) -> tuple[np.ndarray, n
 
 def _knn_graph(z: np.ndarray, k: int) -> scipy.sparse.csr_matrix:
     """Symmetric k-nearest-neighbour graph with heat-kernel weights (bandwidth: median distance)."""
+    from sklearn import neighbors  # scikit-learn takes seconds to import: only where a graph is built
+
     graph = neighbors.kneighbors_graph(z, k, mode="distance", include_self=False)
     scale = np.median(graph.data)
     graph.data = np.exp(-((graph.data / scale) ** 2) / 2.0)
@@ -191,6 +192,8 @@ def local_geometry(z: np.ndarray, k: int) -> np.ndarray:
     (W&M 2009's local distance matrix R_i, made independent of the neighbours'
     order), in units of the set's median nearest-neighbour distance.
     """
+    from sklearn import neighbors
+
     _, idx = neighbors.NearestNeighbors(n_neighbors=k + 1).fit(z).kneighbors(z)
     patches = z[idx]  # (N, k+1, d), the point itself first
     diff = patches[:, :, None, :] - patches[:, None, :, :]

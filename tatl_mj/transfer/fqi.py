@@ -35,7 +35,6 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 import threadpoolctl
-from sklearn import ensemble
 
 from tatl_mj.transfer import fit_time
 from tatl_mj.transfer.features import Features, OneHot, as_states, make_features
@@ -180,7 +179,7 @@ class LinearQ:
 class TreeQ:
     """A scikit-learn forest over inputs ``[s, a]`` (a: the action index)."""
 
-    forest: ensemble.ExtraTreesRegressor
+    forest: Any  # sklearn.ensemble.ExtraTreesRegressor (imported where a tree is fitted)
     n_actions: int
     state_dim: int
 
@@ -518,6 +517,8 @@ def _fqi_trees(
     taken = 0.0 if prior is None else prior.values(t.states)[np.arange(len(t)), t.actions]
     for _ in range(iterations):
         y = t.rewards + continues * q.values(t.next_states).max(axis=1) - taken
+        from sklearn import ensemble  # scikit-learn takes seconds to import: only where trees are grown
+
         forest = ensemble.ExtraTreesRegressor(
             n_estimators=reg.n_estimators,
             min_samples_split=reg.min_samples_split,
@@ -547,3 +548,13 @@ __all__ = [
     "greedy_each",
     "make_regressor",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # Source caches (source.pkl) pickled before tabular Q-iteration moved to tabular_q name
+    # its class here; a resumed run still reads them.
+    if name == "TabularQ":
+        from tatl_mj.transfer.tabular_q import TabularQ
+
+        return TabularQ
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
