@@ -31,15 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.records import read_json
+from tatl_mj.experiments.records import read_record
 from tatl_mj.experiments.summary import (
     REFERENCE_THRESHOLD,
     THRESHOLD_FRACTION,
     Comparison,
     MethodResult,
-    ablation_pairs,
     ablation_verdict,
     compare,
+    declared_pairs,
     known_kernels,
 )
 
@@ -236,7 +236,7 @@ def _method_rows(exp: dict, comparison: Comparison, stats_on: bool) -> list[str]
             ratio = _ratio(r, reference)
         else:
             samples, ratio = "no meaningful threshold", "n/a"
-        row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {samples} | {ratio} "
+        row = f"| {method_label(r.method)} | {data['data']} | {final} | {samples} | {ratio} "
         if stats_on:
             row += f"| {interval_text(data.get('final_iqm'))} | {interval_text(data.get('auc'))} "
         lines.append(row + "|")
@@ -248,7 +248,7 @@ def _verdict_lines(exp: dict, comparison: Comparison, stats_on: bool) -> list[st
     lines: list[str] = []
     verdicts = [_pair_sentence(p) for p in exp.get("ablations", [])]
     if not stats_on:
-        verdicts = [ablation_verdict(comparison, *pair) for pair in ablation_pairs(exp["spec"].get("methods") or {})]
+        verdicts = [ablation_verdict(comparison, *pair) for pair in declared_pairs(exp["spec"], "ablation")]
     if any(verdicts):
         lines += ["", "Transfer against its ablation without the source:", ""]
         lines += [f"- {v}" for v in verdicts if v]
@@ -500,7 +500,7 @@ def _iqm_panel(ax: Any, experiment: dict, order: list[str], colors: dict[str, st
     for i, method in enumerate(order):
         data = experiment["methods"][method]
         budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
-        counted = np.asarray(data["curve"].get("target_transitions", [budgets]), dtype=np.float64)
+        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)
         x = np.median(np.where(counted > 0, counted, budgets), axis=0)
         value, low, high = (
             np.array([np.nan if e[k] is None else e[k] for e in data["iqm"]]) for k in ("value", "low", "high")
@@ -678,7 +678,7 @@ def _seed_curves(experiment: dict, results: Sequence[MethodResult]) -> dict[str,
         data = experiment["methods"][r.method]
         rows = [data["seeds"].index(s) for s in r.seeds]
         budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
-        counted = np.asarray(data["curve"].get("target_transitions", [budgets] * len(data["seeds"])), dtype=np.float64)
+        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)
         # Each seed at the target transitions it counted; a reference that counts none at its budget.
         curves[r.method] = (
             np.where(counted[rows] > 0, counted[rows], budgets),
@@ -1023,7 +1023,7 @@ def plot(run_dir: str | Path) -> list[Path]:
     summary_path = run_dir / "summary.json"
     if not summary_path.exists():
         raise FileNotFoundError(f"{summary_path} not found: run `tatl run ... --out {run_dir}` first")
-    summary = read_json(summary_path)
+    summary = read_record(summary_path)
     figures = run_dir / "figures"
     figures.mkdir(exist_ok=True)
     written = []

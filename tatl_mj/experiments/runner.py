@@ -38,8 +38,9 @@ from tatl_mj import sampling
 from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
-from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, write_atomic, write_json
-from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
+from tatl_mj.experiments.kernels import kernels
+from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, read_record, write_atomic, write_json
+from tatl_mj.experiments.spec import ExperimentSpec, conditions, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import fqi, registry
 from tatl_mj.transfer.method import TransferMethod, contract
 
@@ -130,7 +131,8 @@ def _work(
         artifacts = pickle.loads(source_blob)
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
-    record["kernels"] = pipeline.kernels()  # what it depends on besides its settings and seed
+    record["kernels"] = kernels()  # what it depends on besides its settings and seed
+    record["dynamics"] = dynamics_versions(spec)  # and the versions of its tasks' dynamics
     record["wall_s"] = time.perf_counter() - start
     record["fqi_s"] = fqi.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
     # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
@@ -273,15 +275,14 @@ def _versions() -> dict:
 
 def _kernel_counts(run_dir: RunDirectory, units: list[Unit]) -> dict[str, int]:
     """How many of the run's records each set of arithmetic kernels computed (a run resumed
-    elsewhere, or a Ray cluster of unlike nodes, can mix them); records older than the
-    field count as :data:`summary.UNKNOWN_KERNELS`."""
+    elsewhere, or a Ray cluster of unlike nodes, can mix them)."""
     counts: collections.Counter[str] = collections.Counter()
     for unit in units:
         try:
-            record = read_json(run_dir.record_path(unit.experiment, unit.seed, unit.name))
+            record = read_record(run_dir.record_path(unit.experiment, unit.seed, unit.name))
         except (OSError, ValueError):
             continue  # not finished: named among the failures
-        counts[record.get("kernels", summary_mod.UNKNOWN_KERNELS)] += 1
+        counts[record["kernels"]] += 1
     return dict(counts)
 
 
@@ -439,7 +440,7 @@ class _Recorder:
 
     def copy(self, origin: Unit, unit: Unit) -> None:
         """Writes ``origin``'s finished record as ``unit``'s (see :func:`shared_record`)."""
-        found = read_json(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
+        found = read_record(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
         self.run_dir.write_unit(unit.experiment, unit.seed, unit.name, shared_record(found, unit, origin))
         self.done.add(unit)
         self.run_dir.failure_path(unit.experiment, unit.seed, unit.name).unlink(missing_ok=True)

@@ -26,7 +26,6 @@ Definitions (one place; the table, the figures and summary.json all use them):
   the smallest budget from which its return stays at or above the threshold at
   every larger budget (a method that crosses and falls back has not reached it);
   ``math.inf`` if it never does (``null`` in summary.json, which has no infinity).
-  Records from before transitions were counted fall back to the budget.
 
 :func:`compare` applies them to one experiment of a summary; the results table
 and panel (b) of the figures are both drawn from its answer.
@@ -42,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from tatl_mj.experiments import statistics as stats
-from tatl_mj.experiments.records import RunDirectory, read_json
+from tatl_mj.experiments.records import SCHEMA_VERSION, UNKNOWN_KERNELS, RunDirectory, read_record
 
 THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
 REFERENCE_THRESHOLD = 0.9  # normalised score: the threshold with a declared reference return
@@ -138,8 +137,7 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
     ``experiment`` is ``summary["experiments"][name]``: it needs ``methods``
     (per method ``seeds``, ``final_return``, ``curve.samples`` and
     ``curve.mean_return``) and the random policy's return per seed
-    (``random_returns``, aligned with ``source_seeds``; older summaries give one
-    ``random_return``). ``methods`` are the names asked for, in display order
+    (``random_returns``, aligned with ``source_seeds``). ``methods`` are the names asked for, in display order
     (default: those with records, in the summary's order).
     """
     data = experiment["methods"]
@@ -249,6 +247,19 @@ def placebo_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
     return [(t, p) for p in placebos for t in trained if key(t) is not None and key(t) == key(p)]
 
 
+COMPARE_PAIRS = "compare_pairs"
+"""The key of a spec dict under which ``tatl compare`` declares a user's pairs (never in a TOML spec)."""
+
+
+def declared_pairs(spec: dict, kind: str) -> list[tuple[str, str]]:
+    """The (method, other) pairs of ``kind``, "ablation" or "placebo", that an experiment's spec
+    dict declares: those its method tables make (:func:`ablation_pairs`, :func:`placebo_pairs`),
+    then those ``tatl compare`` adds for a user's methods (``spec[COMPARE_PAIRS][kind]``)."""
+    methods = spec.get("methods") or {}
+    own = ablation_pairs(methods) if kind == "ablation" else placebo_pairs(methods)
+    return own + [(method, other) for method, other in (spec.get(COMPARE_PAIRS) or {}).get(kind, [])]
+
+
 def _side(mine: np.ndarray, theirs: np.ndarray, mine_centre: float, theirs_centre: float) -> tuple[int, int, int]:
     """(+1 better / -1 worse / 0 neither, seeds better, seeds worse) where larger is better."""
     better, worse = int(np.sum(mine > theirs)), int(np.sum(mine < theirs))
@@ -299,13 +310,9 @@ def _samples_text(value: float) -> str:
 
 
 def _random_by_seed(experiment: dict) -> dict[int, float] | None:
-    if "random_returns" in experiment:
-        return dict(zip(experiment["source_seeds"], experiment["random_returns"]))
-    if experiment.get("random_return") is None:
+    if "random_returns" not in experiment:
         return None
-    # An older summary: one value for every seed.
-    seeds = {s for m in experiment["methods"].values() for s in m.get("seeds", [])}
-    return {s: float(experiment["random_return"]) for s in seeds}
+    return dict(zip(experiment["source_seeds"], experiment["random_returns"]))
 
 
 def _experiment(
@@ -363,13 +370,13 @@ def _read_records(
     for seed in seeds:
         path = run_dir.record_path(name, seed, "source")
         if path.exists():
-            sources[seed] = read_json(path)
+            sources[seed] = read_record(path)
     records: dict[str, dict[int, dict]] = {m: {} for m in methods}
     for m in methods:
         for seed in seeds:
             path = run_dir.record_path(name, seed, m)
             if path.exists():
-                records[m][seed] = read_json(path)
+                records[m][seed] = read_record(path)
     return sources, records
 
 
@@ -385,11 +392,11 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
             "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
             # Every real-target transition counted at each budget ([seed][budget]).
-            "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
+            "target_transitions": [[p["target_transitions"] for p in c] for c in curves],
         },
-        "data": recs[seeds_done[0]].get("data", "shared"),
-        # Per seed, each evaluation episode's steps at the largest budget (records that have them).
-        "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]},
+        "data": recs[seeds_done[0]]["data"],
+        # Per seed, each evaluation episode's steps at the largest budget.
+        "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done},
         # Per seed, each evaluation episode's steadiness at the largest budget (where declared).
         "final_steadiness": {
             str(s): recs[s]["curve"][-1]["steadiness"] for s in seeds_done if "steadiness" in recs[s]["curve"][-1]
@@ -406,7 +413,6 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
 
 
 AUC_POINTS = 256
-UNKNOWN_KERNELS = "unknown"  # the kernels of records older than their "kernels" field
 STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met warning
 
 
@@ -465,8 +471,8 @@ def _steadiness(experiment: dict) -> None:
     its interval, in place."""
     compared = compare(experiment).seeds
     for data in experiment["methods"].values():
-        # The compared seeds whose records carry it (older records may not: said in the table).
-        seeds = [s for s in compared if str(s) in data.get("final_steadiness", {})]
+        # The compared seeds whose records carry it (where the target declares it).
+        seeds = [s for s in compared if str(s) in data["final_steadiness"]]
         per_seed = [data["final_steadiness"][str(s)] for s in seeds]
         if not seeds:
             continue
@@ -495,12 +501,10 @@ def _survival(experiment: dict, cap: int | None) -> None:
     over the compared seeds and censored at the episode cap, where any episode ended early."""
     if cap is None:
         return
-    compared = compare(experiment).seeds
+    seeds = list(compare(experiment).seeds)
+    if not seeds:
+        return
     for data in experiment["methods"].values():
-        # The compared seeds whose records carry episode lengths (older records may not).
-        seeds = [s for s in compared if str(s) in data.get("final_steps", {})]
-        if not seeds:
-            continue
         lengths = np.concatenate([np.asarray(data["final_steps"][str(s)], dtype=np.float64) for s in seeds])
         times, probability = stats.survival(lengths, cap)
         if len(times):
@@ -546,12 +550,12 @@ def _statistics(experiment: dict, spec: dict) -> None:
     experiment["best_baseline"] = best
     experiment["ablations"] = [
         _pair(method, ablation, areas, finals)
-        for method, ablation in ablation_pairs(spec.get("methods") or {})
+        for method, ablation in declared_pairs(spec, "ablation")
         if method in areas and ablation in areas
     ]
     experiment["placebo"] = [
         _pair(method, placebo, areas, finals)
-        for method, placebo in placebo_pairs(spec.get("methods") or {})
+        for method, placebo in declared_pairs(spec, "placebo")
         if method in areas and placebo in areas
     ]
     experiment["vs_best_baseline"] = [
@@ -638,5 +642,6 @@ def build(
         "methods": methods,
         "threshold_fraction": THRESHOLD_FRACTION,
         "reference_threshold": REFERENCE_THRESHOLD,
+        "schema_version": SCHEMA_VERSION,
         **extra,
     }
