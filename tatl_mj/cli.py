@@ -171,8 +171,14 @@ def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
 
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
-    physics = runner.physics_report(args.out)
-    records.write_json(Path(args.out) / "physics.json", physics)
+    path = Path(args.out) / "physics.json"
+    try:
+        previous = records.read_json(path)  # reused as it is where no unit ran since
+    except (FileNotFoundError, records.RecordError):
+        previous = None
+    physics = runner.physics_report(args.out, previous=previous if isinstance(previous, dict) else None)
+    if physics is not previous:
+        records.write_json(path, physics)
     print(runner.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     from tatl_mj.experiments import summary as summary_mod

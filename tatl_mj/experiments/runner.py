@@ -613,7 +613,9 @@ def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) -> dict[str, Any]:
+def physics_report(
+    run_dir: str | Path, seconds: float = 0.3, repeats: int = 3, previous: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """A run's work against its physics: the summed unit wall times (``work_s``), and the
     MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
     (``physics_s``: per task, the fastest of ``repeats`` timings of ``seconds`` each, taken
@@ -621,9 +623,38 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
 
     ``fqi_s`` is the part of the work spent in FQI's fits, and ``floor_s`` the physics and
     those fits together: all but the rest of the work, which is what code that keeps
-    the fits can save (both None when some counted records do not time their fits)."""
+    the fits can save (both None when some counted records do not time their fits).
+
+    ``previous``: an earlier report of this folder (its physics.json), returned as it is
+    when the records hold the same work (no unit ran since), so a finished run's rerun
+    does not time the physics again."""
     from tatl_mj import bench
 
+    counted = _physics_counts(run_dir)
+    if previous is not None and {k: previous.get(k) for k in counted} == counted:
+        return previous
+    by_task = {}
+    for key, n in sorted(counted["substeps"].items()):
+        domain, task = key.split("/", 1)
+        # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
+        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
+        timed = max(tries, key=lambda t: t["steps_per_s"])
+        rate = timed["steps_per_s"] * timed["substeps"]
+        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
+    physics_s = sum(v["raw_s"] for v in by_task.values())
+    work_s, fqi_s = counted["work_s"], counted["fqi_s"]
+    return {
+        **counted,
+        "physics_s": physics_s,
+        "ratio": work_s / physics_s if physics_s else None,
+        "floor_s": None if fqi_s is None else physics_s + fqi_s,
+        "by_task": by_task,
+    }
+
+
+def _physics_counts(run_dir: str | Path) -> dict[str, Any]:
+    """What :func:`physics_report` sums from the records: work, FQI's part, substeps by task,
+    and how many records have no substep count."""
     substeps: dict[str, int] = {}
     work_s, fqi_s, uncounted, untimed = 0.0, 0.0, 0, 0
     for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
@@ -641,22 +672,10 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
             untimed += 1
         for key, n in record["physics_substeps"].items():
             substeps[key] = substeps.get(key, 0) + int(n)
-    by_task = {}
-    for key, n in sorted(substeps.items()):
-        domain, task = key.split("/", 1)
-        # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
-        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
-        timed = max(tries, key=lambda t: t["steps_per_s"])
-        rate = timed["steps_per_s"] * timed["substeps"]
-        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
-    physics_s = sum(v["raw_s"] for v in by_task.values())
     return {
         "work_s": work_s,
-        "physics_s": physics_s,
-        "ratio": work_s / physics_s if physics_s else None,
         "fqi_s": None if untimed else fqi_s,
-        "floor_s": None if untimed else physics_s + fqi_s,
-        "by_task": by_task,
+        "substeps": dict(sorted(substeps.items())),
         "records_without_counts": uncounted,
     }
 
