@@ -28,3 +28,14 @@ class Broken:
 
     def learn(self, problem, target_samples):
         raise RuntimeError("deliberately broken plug-in")
+
+
+@dataclasses.dataclass(frozen=True)
+class SourcePolicy:
+    """Transfer with nothing learned on the target: the source's greedy policy through the mapping.
+    Its source-free ablation is :class:`ZeroTorque` (the same nothing, without the source)."""
+
+    name: str = "source-policy"
+
+    def learn(self, problem, target_samples):
+        return problem.projected_source_policy()
