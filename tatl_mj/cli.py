@@ -289,12 +289,15 @@ def _compare(args: argparse.Namespace) -> int:
             raise compare.CompareError("--methods and --out are needed: your methods (module:Class) and a folder")
         if args.check is None and (problem := _check_out(args.out)):
             raise compare.CompareError(problem)
+        entries = [] if args.check is not None else [e.strip() for e in args.methods.split(",") if e.strip()]
+        renamed = dict(_pair("methods", e) for e in entries if "=" in e)  # a built-in under a new name
+        rest = [e for e in entries if "=" not in e]
         try:
-            methods = {} if args.check is not None else _methods(args.methods) or {}
+            methods = _methods(",".join(rest)) or {} if rest else {}
         except ValueError as error:
             raise compare.CompareError(f"--methods: {error}") from None
         pairs = {kind: [_pair(kind, text) for text in getattr(args, kind) or ()] for kind in compare.PAIR_KINDS}
-        plan = compare.plan(ref, specs, methods, pairs=pairs, preset=args.preset, seeds=seeds)
+        plan = compare.plan(ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds)
         unit = _unit(args.check) if args.check else None
     except (ValueError, FileNotFoundError) as error:  # CompareError, ReferenceError, SpecError, a plug-in's
         print(f"tatl compare: {error}", file=sys.stderr)
@@ -340,11 +343,19 @@ def _compare_seeds(args: argparse.Namespace, theirs: list[int]) -> list[int] | N
     return list(range(first, first + (len(theirs) if args.seeds is None else args.seeds)))
 
 
-def _pair(kind: str, text: str) -> tuple[str, str]:
-    method, _, other = text.partition("=")
-    if not method.strip() or not other.strip():
-        raise ValueError(f"--{kind} {text}: expected YOURS={kind.upper()}, e.g. mine=mine-{kind}")
-    return method.strip(), other.strip()
+PAIR_FORMS = {
+    "ablation": "YOURS=ABLATION, e.g. mine=mine-no-source",
+    "placebo": "YOURS=PLACEBO, e.g. mine=mine-placebo",
+    "methods": "NEW=BUILTIN, e.g. ta-tl-copy=ta-tl",
+}
+
+
+def _pair(option: str, text: str) -> tuple[str, str]:
+    """``A=B`` given to ``--OPTION`` as (A, B); ValueError naming the form it takes."""
+    left, _, right = text.partition("=")
+    if not left.strip() or not right.strip():
+        raise ValueError(f"--{option} {text}: expected {PAIR_FORMS[option]}")
+    return left.strip(), right.strip()
 
 
 def _unit(text: str) -> tuple[str, int, str]:
@@ -520,7 +531,11 @@ def build_parser() -> argparse.ArgumentParser:
 def _compare_parser(sub: Any) -> None:
     p = sub.add_parser("compare", help="your methods against a reference set's, without rerunning it")
     p.add_argument("specs", nargs="+", help="experiment specs the reference was made from, e.g. tasks/*.toml")
-    p.add_argument("--methods", default=None, help="your methods, comma-separated, as module:Class")
+    p.add_argument(
+        "--methods",
+        default=None,
+        help="your methods, comma-separated, as module:Class; NEW=BUILTIN runs a built-in under a new name",
+    )
     p.add_argument("--out", type=_non_empty, default=None, help="output folder; rerunning resumes it")
     p.add_argument(
         "--reference",

@@ -81,24 +81,27 @@ def test_without_a_declared_ablation_a_plugin_is_only_ranked(compared, tiny_refe
 
 def test_a_built_in_under_another_name_reproduces_its_reference_records(tiny_reference, tmp_path):
     path, run, built = tiny_reference
-    spec = spec_mod.load_spec(path)
-    tatl_copy = dataclasses.replace(
-        spec_mod.methods_from_spec(spec, spec.preset("tiny"), ["ta-tl"])["ta-tl"], name="copy"
-    )
-    plan = compare.plan(built, [spec], {"copy": tatl_copy}, pairs={"ablation": [("copy", "apprentice-fqi")]})
-    summary = compare.run(plan, tmp_path, workers=2, progress=False).summary
-    costs = ("wall_s", "fqi_s", "learn_s", "evaluate_s", "method")
+    done = _cli(str(path), "--reference", str(built.folder), "--methods", "copy=ta-tl", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    summary = records.read_record(tmp_path / "summary.json")
+    costs = ("wall_s", "fqi_s", "learn_s", "evaluate_s")
     for seed in (0, 1):
         mine = records.read_json(tmp_path / "records" / EXPERIMENT / f"seed{seed}" / "copy.json")
         theirs = records.read_json(run / "records" / EXPERIMENT / f"seed{seed}" / "ta-tl.json")
-        assert compare._differences(mine, theirs) == [] or set(compare._differences(mine, theirs)) <= _paths(costs)
+        assert set(compare._differences(mine, theirs)) <= _paths(costs)  # bit for bit but its name and costs
         assert [p["returns"] for p in mine["curve"]] == [p["returns"] for p in theirs["curve"]]
         assert mine["method"] == "copy"
+    # Run as a variant of ta-tl with the spec's settings, it is paired as ta-tl is, with the same verdicts.
     experiment = summary["experiments"][EXPERIMENT]
-    pairs = {p["method"]: {k: v for k, v in p.items() if k != "method"} for p in experiment["ablations"]}
-    assert pairs["copy"] == pairs["ta-tl"]  # the same verdict, probabilities and intervals
-    best = {p["method"]: {k: v for k, v in p.items() if k != "method"} for p in experiment["vs_best_baseline"]}
-    assert best["copy"] == best["ta-tl"]
+    for kind, other in (("ablations", "apprentice-fqi"), ("placebo", "ta-tl-placebo"), ("vs_best_baseline", "uma-tl")):
+        pairs = {p["method"]: {k: v for k, v in p.items() if k != "method"} for p in experiment[kind]}
+        assert pairs["copy"] == pairs["ta-tl"] and pairs["copy"]["ablation"] == other, kind
+    lacking = _cli(str(path), "--reference", str(built.folder), "--methods", "copy=ta-tl-h", "--out", str(tmp_path))
+    assert lacking.returncode == 2
+    assert lacking.stderr == (
+        f"tatl compare: --methods copy=ta-tl-h: {path} lists no method 'ta-tl-h' to rename (its methods: "
+        "['ta-tl', 'ta-tl-placebo', 'apprentice-fqi', 'uma-tl', 'rl'])\n"
+    )
 
 
 def _paths(keys):
@@ -262,4 +265,4 @@ def test_the_compare_command_resumes_a_comparison_and_names_what_it_wrote(compar
         str(path), "--reference", str(built.folder), "--methods", methods, "--ablation", "zero", "--out", str(again)
     )
     assert bad.returncode == 2
-    assert bad.stderr == "tatl compare: --ablation zero: expected YOURS=ABLATION, e.g. mine=mine-ablation\n"
+    assert bad.stderr == "tatl compare: --ablation zero: expected YOURS=ABLATION, e.g. mine=mine-no-source\n"

@@ -323,7 +323,14 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
 
     other = lambda states: np.ones((len(states), 1))  # noqa: E731
     points = [
-        {"samples": b, "samples_used": 10, "target_transitions": b, "learn_s": 0.0, "warnings": []}
+        {
+            "samples": b,
+            "samples_used": 10,
+            "target_transitions": b,
+            "rollout_transitions": 0,
+            "learn_s": 0.0,
+            "warnings": [],
+        }
         for b in (40, 120, 200)
     ]
     curve = pipeline._evaluated_curve(spec, preset, target, points, [policy, other, policy], eval_seed=3)

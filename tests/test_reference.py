@@ -120,3 +120,13 @@ def test_the_reference_command_builds_lists_and_unpacks(tiny_reference, tmp_path
         "tatl reference: no reference set 'nope'; valid sets: ['again'], or the path of a folder holding a "
         "manifest.json\n"
     )
+
+
+def test_a_set_built_again_keeps_its_hand_written_fragile_verdicts(tiny_reference, tmp_path):
+    _, run, _ = tiny_reference
+    first = reference.build(run, "kept", "tatl run ...", tmp_path)
+    manifest = json.loads((first.folder / reference.MANIFEST).read_text())
+    fragile = [{"experiment": EXPERIMENT, "method": "ta-tl", "versus": "uma-tl", "why": "rounding at 40 samples"}]
+    (first.folder / reference.MANIFEST).write_text(json.dumps({**manifest, "fragile_verdicts": fragile}))
+    again = reference.build(run, "kept", "tatl run ... (again)", tmp_path)
+    assert again.manifest.fragile_verdicts == tuple(fragile) and again.manifest.command == "tatl run ... (again)"

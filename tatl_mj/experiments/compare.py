@@ -63,8 +63,9 @@ class CompareError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class Plan:
-    """A checked comparison: the reference, the experiments (sweeps expanded) to run, the
-    user's methods by name (None: a built-in of that name) and their declared pairs."""
+    """A checked comparison: the reference, the experiments (sweeps expanded) to run, with a
+    table for each built-in renamed, the user's methods by name (None: a built-in run with
+    each spec's settings for it) and their declared pairs."""
 
     reference: ReferenceSet
     specs: tuple[ExperimentSpec, ...]
@@ -137,6 +138,7 @@ def plan(
     specs: list[ExperimentSpec],
     methods: dict[str, Any],
     *,
+    renamed: dict[str, str] | None = None,
     pairs: dict[str, list[tuple[str, str]]] | None = None,
     preset: str | None = None,
     seeds: list[int] | None = None,
@@ -144,13 +146,25 @@ def plan(
     """Checks everything a comparison needs, before any work; :class:`CompareError` if it cannot run.
 
     ``methods``: the user's, by name (a method object, or None for a built-in the
-    reference does not hold); ``pairs``: per kind in :data:`PAIR_KINDS`, (one of
-    ``methods``, its ablation or placebo: another of them or a reference method).
+    reference does not hold); ``renamed``: new name -> a method each spec lists, run
+    under the new name with that spec's settings for it (a variant table, as
+    ``[methods.NEW] method = "ta-tl"`` makes, so it is paired as that method is);
+    ``pairs``: per kind in :data:`PAIR_KINDS`, (one of those, its ablation or placebo:
+    another of them or a reference method).
     """
     check_reference(reference, preset, seeds)
     expanded = [condition for spec in specs for condition in conditions(spec)]
     for spec in expanded:
         check_spec(reference, spec)
+    renamed = dict(renamed or {})
+    for new, base in renamed.items():
+        lacking = next((s for s in expanded if base not in s.methods), None)
+        if lacking is not None:
+            raise CompareError(
+                f"--methods {new}={base}: {lacking.path} lists no method {base!r} to rename (its methods: "
+                f"{list(lacking.methods)})"
+            )
+    methods = {**methods, **dict.fromkeys(renamed)}
     held = {m for e in reference.manifest.experiments for m in reference.manifest.methods(e)}
     taken = sorted(set(methods) & held)
     if taken:
@@ -179,10 +193,19 @@ def plan(
                 )
     return Plan(
         reference=reference,
-        specs=tuple(expanded),
+        specs=tuple(_with_renamed(spec, renamed) for spec in expanded),
         methods=dict(methods),
         pairs={kind: tuple(tuple(p) for p in pairs.get(kind, ())) for kind in PAIR_KINDS},  # type: ignore[misc]
     )
+
+
+def _with_renamed(spec: ExperimentSpec, renamed: dict[str, str]) -> ExperimentSpec:
+    """``spec`` with a variant table per renamed method: its base's settings under the new name.
+    Only the run sees it; the spec was checked against the reference as it was given."""
+    tables = {
+        new: {"method": spec.methods[base].get("method", base), **spec.methods[base]} for new, base in renamed.items()
+    }
+    return dataclasses.replace(spec, methods={**spec.methods, **tables}) if tables else spec
 
 
 @dataclasses.dataclass(frozen=True)

@@ -157,6 +157,7 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
 
     ``command`` is the ``tatl run`` command that made the run, as the manifest names it.
     Refuses a run with units that did not finish and records that name no dynamics versions.
+    A set built again keeps the fragile verdicts its manifest lists (they are written by hand).
     """
     run = RunDirectory(run_dir)
     try:
@@ -190,6 +191,7 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
             "methods": methods,
         }
     folder = root / name
+    fragile = load(folder).manifest.fragile_verdicts if (folder / MANIFEST).is_file() else ()
     data = {
         SPECS: _packed([json.dumps({e: summary["experiments"][e]["spec"] for e in experiments}, sort_keys=True)]),
         RECORDS: _packed(json.dumps(line, sort_keys=True, separators=(",", ":")) for line in lines),
@@ -209,6 +211,7 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
         versions=summary["versions"],
         records=len(lines),
         files={file: hashlib.sha256(blob).hexdigest() for file, blob in data.items()},
+        fragile_verdicts=fragile,
     )
     write_json(folder / MANIFEST, manifest.to_json())
     return ReferenceSet(folder=folder, manifest=manifest)
