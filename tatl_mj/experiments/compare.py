@@ -378,18 +378,25 @@ class Check:
 
 def cheapest_unit(plan_: Plan) -> tuple[str, int, str]:
     """The (experiment, seed, method) of the planned experiments whose method unit and source
-    unit took the least work in the reference, among those computed there (not shared copies)."""
-    cost: dict[tuple[str, int], float] = {}
-    methods: list[tuple[float, tuple[str, int, str]]] = []
+    unit took the least work in the reference, among those computed there (not shared copies)
+    whose source and method both fit FQI by least squares, the arithmetic that other kernels
+    change (any, where none does)."""
+    sources: dict[tuple[str, int], dict] = {}
+    methods: list[tuple[tuple[str, int, str], dict]] = []
     experiments = {s.name for s in plan_.specs}
     for experiment, seed, unit, record in plan_.reference.records():
         if experiment not in experiments:
             continue
         if unit == SOURCE_UNIT:
-            cost[experiment, seed] = float(record["wall_s"])
+            sources[experiment, seed] = record
         elif "shared_from" not in record:
-            methods.append((float(record["wall_s"]), (experiment, seed, unit)))
-    return min(methods, key=lambda m: m[0] + cost[m[1][:2]])[1]
+            methods.append(((experiment, seed, unit), record))
+
+    def cost(entry: tuple[tuple[str, int, str], dict]) -> float:
+        return float(entry[1]["wall_s"]) + float(sources[entry[0][:2]]["wall_s"])
+
+    fitting = [m for m in methods if m[1]["fqi_s"] > 0 and sources[m[0][:2]]["fqi_s"] > 0]
+    return min(fitting or methods, key=cost)[0]
 
 
 def check(plan_: Plan, unit: tuple[str, int, str] | None = None, pin: kernels_mod.Pin | None = None) -> Check:
