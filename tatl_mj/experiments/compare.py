@@ -173,6 +173,20 @@ def plan(
             "(its `name`)"
         )
     pairs = pairs or {}
+    _check_pairs(reference, expanded, methods, pairs)
+    return Plan(
+        reference=reference,
+        specs=tuple(_with_renamed(spec, renamed) for spec in expanded),
+        methods=dict(methods),
+        pairs={kind: tuple(tuple(p) for p in pairs.get(kind, ())) for kind in PAIR_KINDS},  # type: ignore[misc]
+    )
+
+
+def _check_pairs(
+    reference: ReferenceSet, specs: list[ExperimentSpec], methods: dict[str, Any], pairs: dict[str, Any]
+) -> None:
+    """Refuses a pair whose first method is not the user's, or whose second is neither the user's
+    nor a method of the reference in every experiment."""
     unknown_kinds = sorted(set(pairs) - set(PAIR_KINDS))
     if unknown_kinds:
         raise ValueError(f"unknown pair kind {unknown_kinds[0]!r}; valid kinds: {list(PAIR_KINDS)}")
@@ -184,27 +198,19 @@ def plan(
                     f"a pair names one of your methods first"
                 )
             missing = [
-                s.name for s in expanded if other not in methods and other not in reference.manifest.methods(s.name)
+                s.name for s in specs if other not in methods and other not in reference.manifest.methods(s.name)
             ]
             if missing:
                 raise CompareError(
                     f"--{kind} {method}={other}: {other!r} is neither one of --methods ({sorted(methods)}) nor a "
                     f"method of reference {reference.name!r} in {missing[0]}"
                 )
-    return Plan(
-        reference=reference,
-        specs=tuple(_with_renamed(spec, renamed) for spec in expanded),
-        methods=dict(methods),
-        pairs={kind: tuple(tuple(p) for p in pairs.get(kind, ())) for kind in PAIR_KINDS},  # type: ignore[misc]
-    )
 
 
 def _with_renamed(spec: ExperimentSpec, renamed: dict[str, str]) -> ExperimentSpec:
     """``spec`` with a variant table per renamed method: its base's settings under the new name.
     Only the run sees it; the spec was checked against the reference as it was given."""
-    tables = {
-        new: {"method": spec.methods[base].get("method", base), **spec.methods[base]} for new, base in renamed.items()
-    }
+    tables = {new: {"method": base, **spec.methods[base]} for new, base in renamed.items()}
     return dataclasses.replace(spec, methods={**spec.methods, **tables}) if tables else spec
 
 
@@ -218,26 +224,26 @@ class Outcome:
     paths: list[Path]
 
 
-def _claim(out: Path, plan_: Plan) -> None:
+def _claim(out: Path, planned: Plan) -> None:
     """Marks ``out`` as a comparison against the plan's reference; refuses one against another."""
     path = out / COMPARISON
     if path.exists():
         earlier = read_json(path).get("reference")
-        if earlier != plan_.reference.name:
+        if earlier != planned.reference.name:
             raise CompareError(
-                f"--out {out}: holds a comparison against reference {earlier!r}, not {plan_.reference.name!r}; "
+                f"--out {out}: holds a comparison against reference {earlier!r}, not {planned.reference.name!r}; "
                 "use another --out"
             )
-    write_json(path, {"reference": plan_.reference.name, "methods": sorted(plan_.methods)})
+    write_json(path, {"reference": planned.reference.name, "methods": sorted(planned.methods)})
 
 
-def _reference_records(plan_: Plan, run: RunDirectory) -> collections.Counter[str]:
+def _reference_records(planned: Plan, run: RunDirectory) -> collections.Counter[str]:
     """Writes the reference's method records of the planned experiments and seeds into ``run``
     (where not there yet); returns how many records each set of kernels computed."""
-    wanted = {s.name: set(plan_.reference.manifest.methods(s.name)) for s in plan_.specs}
+    wanted = {s.name: set(planned.reference.manifest.methods(s.name)) for s in planned.specs}
     counts: collections.Counter[str] = collections.Counter()
-    for experiment, seed, unit, record in plan_.reference.records():
-        if unit in wanted.get(experiment, ()) and seed in plan_.seeds:
+    for experiment, seed, unit, record in planned.reference.records():
+        if unit in wanted.get(experiment, ()) and seed in planned.seeds:
             path = run.record_path(experiment, seed, unit)
             if not path.exists():
                 write_json(path, record)
@@ -245,28 +251,28 @@ def _reference_records(plan_: Plan, run: RunDirectory) -> collections.Counter[st
     return counts
 
 
-def kernels_note(plan_: Plan, computed: dict[str, int], pin: kernels_mod.Pin | None) -> str | None:
+def kernels_note(planned: Plan, computed: dict[str, int], pin: kernels_mod.Pin | None) -> str | None:
     """One note where the user's records were computed with other kernels than the reference's,
     with the verdicts the reference marks as moving with them; None where they were not."""
-    theirs = set(plan_.reference.manifest.kernels)
+    theirs = set(planned.reference.manifest.kernels)
     if set(computed) <= theirs and len(theirs) == 1:
         return None
     why = f" ({pin.why_not})" if pin is not None and pin.why_not else ""
     fragile = [
         f"{v['experiment']}: {v['method']} vs {v['versus']}"
-        for v in plan_.reference.manifest.fragile_verdicts
-        if v["experiment"] in {s.name for s in plan_.specs}
+        for v in planned.reference.manifest.fragile_verdicts
+        if v["experiment"] in {s.name for s in planned.specs}
     ]
     listed = "; ".join(fragile) if fragile else "none are marked in its manifest"
     return (
         f"note: your units were computed with the arithmetic kernels {sorted(computed)}, reference "
-        f"{plan_.reference.name!r}'s with {sorted(theirs)}{why}: per-seed returns can differ, and these verdicts "
+        f"{planned.reference.name!r}'s with {sorted(theirs)}{why}: per-seed returns can differ, and these verdicts "
         f"are known to move with the kernels: {listed}"
     )
 
 
 def run(
-    plan_: Plan, out: str | Path, *, workers: int = 2, progress: bool = True, pin: kernels_mod.Pin | None = None
+    planned: Plan, out: str | Path, *, workers: int = 2, progress: bool = True, pin: kernels_mod.Pin | None = None
 ) -> Outcome:
     """Runs the plan's units into ``out`` (resumable, as ``tatl run``), adds the reference's
     records, and writes summary.json, results.md and the figures; returns what it wrote.
@@ -281,24 +287,24 @@ def run(
         workers = max(workers, 2)
     run_dir = RunDirectory(out)
     out.mkdir(parents=True, exist_ok=True)
-    _claim(out, plan_)
+    _claim(out, planned)
     failed: runner.RunFailed | None = None
     with kernels_mod.workers_under(pin or kernels_mod.Pin(env={}, kernels="")):
         try:
             own = runner.run(
-                list(plan_.specs), plan_.preset, plan_.seeds, out, workers=workers, methods=plan_.methods,
+                list(planned.specs), planned.preset, planned.seeds, out, workers=workers, methods=planned.methods,
                 progress=progress,
             )  # fmt: skip
         except runner.RunFailed as error:
             failed, own = error, error.summary
-    counts = _reference_records(plan_, run_dir) + collections.Counter(own["kernels"])
-    note = kernels_note(plan_, own["kernels"], pin)
+    counts = _reference_records(planned, run_dir) + collections.Counter(own["kernels"])
+    note = kernels_note(planned, own["kernels"], pin)
     summary = summary_mod.build(
         run_dir,
-        specs=[{**spec_to_dict(s), summary_mod.COMPARE_PAIRS: _pairs_json(plan_)} for s in plan_.specs],
-        preset=plan_.preset,
-        seeds=plan_.seeds,
-        methods=_methods(plan_),
+        specs=[{**spec_to_dict(s), summary_mod.COMPARE_PAIRS: _pairs_json(planned)} for s in planned.specs],
+        preset=planned.preset,
+        seeds=planned.seeds,
+        methods=_methods(planned),
         versions=own["versions"],
         kernels=dict(counts),
         wall_s=own["wall_s"],
@@ -306,38 +312,38 @@ def run(
         executor="local",
         failures=own["failures"],
         compare={
-            "reference": plan_.reference.name,
-            "reference_manifest": plan_.reference.manifest.to_json(),
-            "methods": sorted(plan_.methods),
-            "pairs": _pairs_json(plan_),
+            "reference": planned.reference.name,
+            "reference_manifest": planned.reference.manifest.to_json(),
+            "methods": sorted(planned.methods),
+            "pairs": _pairs_json(planned),
             "kernels_note": note,
         },
     )
     write_json(run_dir.summary, summary)
     paths = plot.plot(out)
-    _head_results(out / "results.md", plan_, note)
+    _head_results(out / "results.md", planned, note)
     if failed is not None:
         raise failed
     return Outcome(summary=summary, kernels_note=note, paths=paths)
 
 
-def _pairs_json(plan_: Plan) -> dict[str, list[list[str]]]:
-    return {kind: [list(p) for p in listed] for kind, listed in plan_.pairs.items()}
+def _pairs_json(planned: Plan) -> dict[str, list[list[str]]]:
+    return {kind: [list(p) for p in listed] for kind, listed in planned.pairs.items()}
 
 
-def _methods(plan_: Plan) -> list[str]:
+def _methods(planned: Plan) -> list[str]:
     """Every reference method of the planned experiments, then the user's."""
-    manifest = plan_.reference.manifest
-    held = dict.fromkeys(m for s in plan_.specs for m in manifest.methods(s.name))
-    return [*held, *plan_.methods]
+    manifest = planned.reference.manifest
+    held = dict.fromkeys(m for s in planned.specs for m in manifest.methods(s.name))
+    return [*held, *planned.methods]
 
 
-def _head_results(path: Path, plan_: Plan, note: str | None) -> None:
+def _head_results(path: Path, planned: Plan, note: str | None) -> None:
     """Opens results.md with what the tables compare: the reference and the user's methods."""
-    manifest = plan_.reference.manifest
-    pairs = [f"`{m}` against `{o}` ({kind})" for kind, listed in plan_.pairs.items() for m, o in listed]
+    manifest = planned.reference.manifest
+    pairs = [f"`{m}` against `{o}` ({kind})" for kind, listed in planned.pairs.items() for m, o in listed]
     head = (
-        f"Your methods ({', '.join(f'`{m}`' for m in plan_.methods)}) against reference set "
+        f"Your methods ({', '.join(f'`{m}`' for m in planned.methods)}) against reference set "
         f"`{manifest.name}` (preset `{manifest.preset}`, seeds {_seed_text(manifest.seeds)}, records of tatl-mj "
         f"{manifest.package_version}, verdict rule {manifest.verdict_rule_version}), made by `{manifest.command}`. "
         + (f"Your pairs: {'; '.join(pairs)}." if pairs else "You declared no ablation or placebo of your own "
@@ -376,15 +382,15 @@ class Check:
         return f"not reproduced: {self.unit} differs in {len(self.differences)} fields ({shown}); {kernels}"
 
 
-def cheapest_unit(plan_: Plan) -> tuple[str, int, str]:
+def cheapest_unit(planned: Plan) -> tuple[str, int, str]:
     """The (experiment, seed, method) of the planned experiments whose method unit and source
     unit took the least work in the reference, among those computed there (not shared copies)
     whose source and method both fit FQI by least squares, the arithmetic that other kernels
     change (any, where none does)."""
     sources: dict[tuple[str, int], dict] = {}
     methods: list[tuple[tuple[str, int, str], dict]] = []
-    experiments = {s.name for s in plan_.specs}
-    for experiment, seed, unit, record in plan_.reference.records():
+    experiments = {s.name for s in planned.specs}
+    for experiment, seed, unit, record in planned.reference.records():
         if experiment not in experiments:
             continue
         if unit == SOURCE_UNIT:
@@ -399,20 +405,20 @@ def cheapest_unit(plan_: Plan) -> tuple[str, int, str]:
     return min(fitting or methods, key=cost)[0]
 
 
-def check(plan_: Plan, unit: tuple[str, int, str] | None = None, pin: kernels_mod.Pin | None = None) -> Check:
+def check(planned: Plan, unit: tuple[str, int, str] | None = None, pin: kernels_mod.Pin | None = None) -> Check:
     """Reruns one reference unit (default :func:`cheapest_unit`) and its source unit in a fresh
     folder, with ``pin``'s kernels, and compares its records with the reference's, field by field."""
-    experiment, seed, method = unit or cheapest_unit(plan_)
-    spec = next(s for s in plan_.specs if s.name == experiment)
+    experiment, seed, method = unit or cheapest_unit(planned)
+    spec = next(s for s in planned.specs if s.name == experiment)
     found = {
         u: record
-        for e, s, u, record in plan_.reference.records()
+        for e, s, u, record in planned.reference.records()
         if (e, s) == (experiment, seed) and u in (SOURCE_UNIT, method)
     }
     with tempfile.TemporaryDirectory(prefix="tatl-check-") as folder:
         with kernels_mod.workers_under(pin or kernels_mod.Pin(env={}, kernels="")):
             # Two workers: each unit in a spawned process, which the pinned kernels reach.
-            runner.run([spec], plan_.preset, [seed], folder, workers=2, methods=[method], progress=False)
+            runner.run([spec], planned.preset, [seed], folder, workers=2, methods=[method], progress=False)
         run_dir = RunDirectory(folder)
         mine = {u: read_record(run_dir.record_path(experiment, seed, u)) for u in found}
     differences = tuple(f"{u}.{path}" for u in (SOURCE_UNIT, method) for path in _differences(mine[u], found[u]))
