@@ -92,6 +92,7 @@ TINY_REFERENCE_SPEC = """
 name = "tiny_flip"
 title = "A tiny flipped pendulum"
 paper_claim = "(test) none"
+best_baseline = { final = "uma-tl", efficiency = "uma-tl" }
 
 [source]
 domain = "pendulum"

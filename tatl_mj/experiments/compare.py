@@ -15,10 +15,13 @@ version differs, another record schema, a user method named like a reference
 method, and a pair naming a method that is not there.
 
 Transfer credit: a user names the source-free ablation (and the placebo) of each
-of their methods with ``ablation`` and ``placebo`` pairs, on the command line
-(``--ablation mine=mine-nosource``), not in the method: the pairs a verdict
-answers belong to the comparison, as a spec's own pairs do. They join the
-spec's pairs through ``summary.declared_pairs``.
+of their methods on the command line (``--ablation mine=mine-no-source``), not in
+the method: the pairs a verdict answers belong to the comparison, as a spec's own
+pairs belong to the spec. They reach the verdict rule as a spec's own do: the
+spec the summary reads gains a method table for each user method, with the
+``ablation`` and ``placebo`` keys a spec's tables declare pairs with
+(:func:`_summary_spec`; ``verdicts.declared_pairs`` reads them), so the user's
+methods also meet the spec's frozen best baseline.
 
 Kernels: the user's units run with the reference's arithmetic kernels where this
 machine can (``kernels.pin_to``); the records say which kernels computed them,
@@ -191,6 +194,9 @@ def _check_pairs(
     if unknown_kinds:
         raise ValueError(f"unknown pair kind {unknown_kinds[0]!r}; valid kinds: {list(PAIR_KINDS)}")
     for kind, listed in pairs.items():
+        twice = sorted({m for m, _ in listed if [n for n, _ in listed].count(m) > 1})
+        if twice:
+            raise CompareError(f"--{kind}: {twice[0]!r} is given two; a method has one {kind}")
         for method, other in listed:
             if method not in methods:
                 raise CompareError(
@@ -301,7 +307,7 @@ def run(
     note = kernels_note(planned, own["kernels"], pin)
     summary = summary_mod.build(
         run_dir,
-        specs=[{**spec_to_dict(s), summary_mod.COMPARE_PAIRS: _pairs_json(planned)} for s in planned.specs],
+        specs=[_summary_spec(s, planned) for s in planned.specs],
         preset=planned.preset,
         seeds=planned.seeds,
         methods=_methods(planned),
@@ -325,6 +331,19 @@ def run(
     if failed is not None:
         raise failed
     return Outcome(summary=summary, kernels_note=note, paths=paths)
+
+
+def _summary_spec(spec: ExperimentSpec, planned: Plan) -> dict:
+    """The spec as the summary reads it, with a method table for each of the user's methods that
+    carries its declared pairs (``registry.PAIR_KEYS``), so that the verdict rule pairs them as
+    it pairs the spec's own (``verdicts.declared_pairs``) and compares them with the spec's
+    frozen best baseline. The spec itself, as checked against the reference, is unchanged."""
+    table = spec_to_dict(spec)
+    methods = {**table["methods"], **{name: dict(table["methods"].get(name) or {}) for name in planned.methods}}
+    for kind, listed in planned.pairs.items():
+        for method, other in listed:
+            methods[method][kind] = other
+    return {**table, "methods": methods}
 
 
 def _pairs_json(planned: Plan) -> dict[str, list[list[str]]]:

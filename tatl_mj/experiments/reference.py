@@ -44,9 +44,6 @@ REFERENCE_ROOT = Path(__file__).resolve().parents[1] / "reference"
 MANIFEST = "manifest.json"
 SPECS = "specs.json.xz"
 RECORDS = "records.jsonl.xz"
-VERDICT_RULE_VERSION: int = getattr(summary_mod, "VERDICT_RULE_VERSION", 0)
-"""The verdict rule of this package, as a manifest names it: ``summary.VERDICT_RULE_VERSION``
-(issue 60's), 0 where summary names none yet. Read here and nowhere else."""
 
 
 class ReferenceError(ValueError):
@@ -190,10 +187,11 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
             "dynamics": json.loads(dynamics.pop()),
             "methods": methods,
         }
+    specs = {e: _in_run_order(summary["experiments"][e]["spec"], summary["methods"]) for e in experiments}
     folder = root / name
     fragile = load(folder).manifest.fragile_verdicts if (folder / MANIFEST).is_file() else ()
     data = {
-        SPECS: _packed([json.dumps({e: summary["experiments"][e]["spec"] for e in experiments}, sort_keys=True)]),
+        SPECS: _packed([json.dumps(specs)]),  # not sorted: a spec's method order is its pairs' order
         RECORDS: _packed(json.dumps(line, sort_keys=True, separators=(",", ":")) for line in lines),
     }
     for file, blob in data.items():
@@ -202,7 +200,7 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
         name=name,
         package_version=str(summary["versions"]["tatl-mj"]),
         schema_version=SCHEMA_VERSION,
-        verdict_rule_version=VERDICT_RULE_VERSION,
+        verdict_rule_version=summary["verdict_rule_version"],  # the rule that judged the run
         preset=preset,
         seeds=tuple(seeds),
         command=command,
@@ -215,6 +213,14 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
     )
     write_json(folder / MANIFEST, manifest.to_json())
     return ReferenceSet(folder=folder, manifest=manifest)
+
+
+def _in_run_order(spec: dict, order: list[str]) -> dict:
+    """``spec`` with its methods in the run's order (summary.json's ``methods``): summary.json
+    keeps a spec's tables sorted by name, the run listed them as the spec file does."""
+    methods = spec["methods"]
+    ranked = sorted(methods, key=lambda m: order.index(m) if m in order else len(order))
+    return {**spec, "methods": {m: methods[m] for m in ranked}}
 
 
 def _packed(lines: Any) -> bytes:

@@ -335,7 +335,7 @@ def _plan(
 
 # What a method unit's record may depend on besides its method and seed: everything in
 # its spec but the experiment's names, its mapping and its other methods.
-_NOT_SHARED = ("name", "title", "paper_claim", "path", "mapping", "methods", "streams")
+_NOT_SHARED = ("name", "title", "paper_claim", "paper", "best_baseline", "path", "mapping", "methods", "streams")
 
 
 def _experiment_key(spec: ExperimentSpec, preset: str) -> list:

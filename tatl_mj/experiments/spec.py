@@ -158,6 +158,14 @@ class ExperimentSpec:
     # same source data, target samples and evaluation starts (a paired comparison), and
     # their methods without a source are computed once (``tatl_mj.experiments.runner``).
     streams: str = ""
+    # The strongest baseline per verdict question ({"final": NAME, "efficiency": NAME}),
+    # chosen on the tuning seeds and frozen here (``verdicts.choose_best_baseline``): every
+    # method that is not a baseline is compared with it, whichever seeds are reported.
+    best_baseline: dict = dataclasses.field(default_factory=dict)
+    # What the paper reports for this experiment, for the paper-vs-here table
+    # (``tables.paper_table``): ``section`` (where in the paper) and ``numbers`` (its
+    # figures, as text). Empty for the variants and sweeps, which the paper does not have.
+    paper: dict = dataclasses.field(default_factory=dict)
 
     def preset(self, name: str) -> Preset:
         if name not in self.presets:
@@ -373,6 +381,12 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
     for name, settings in spec.methods.items():
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
+        for key in registry.PAIR_KEYS:
+            other = settings.get(key)
+            if key in settings and (not isinstance(other, str) or other not in spec.methods or other == name):
+                _fail(
+                    p, f"methods.{name}.{key}", f"the name of another method of this spec {sorted(spec.methods)}", other
+                )
         try:
             from tatl_mj.transfer.method import contract
 
@@ -381,6 +395,16 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
                 check(source, target)
         except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
+    for key, value in spec.paper.items():
+        if key not in ("section", "numbers"):
+            raise SpecError(f"{p}: unknown key 'paper.{key}'; valid keys: ['numbers', 'section']")
+        if not isinstance(value, str):
+            _fail(p, f"paper.{key}", "a string", value)
+    for question, baseline in spec.best_baseline.items():
+        if question not in ("final", "efficiency"):
+            raise SpecError(f"{p}: unknown key 'best_baseline.{question}'; valid keys: ['efficiency', 'final']")
+        if baseline not in spec.methods:
+            _fail(p, f"best_baseline.{question}", f"a method of this spec {sorted(spec.methods)}", baseline)
 
 
 def _check_sweep(spec: ExperimentSpec) -> None:
@@ -503,7 +527,7 @@ def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
     if name in registry.METHODS:
         raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
     obj = plugins.load(path, "method")
-    kwargs = {k: _tuples(v) for k, v in settings.items() if k != registry.VARIANT_KEY}
+    kwargs = {k: _tuples(v) for k, v in settings.items() if k not in (registry.VARIANT_KEY, *registry.PAIR_KEYS)}
     if isinstance(obj, type):
         try:
             parameters = inspect.signature(obj).parameters
@@ -540,11 +564,23 @@ def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:
     return skeleton
 
 
+EXTENDS, UNSET = "extends", "unset"
+"""A spec's loader keys: ``extends = "PARENT.toml"`` (a path relative to the spec) starts
+from the parent's settings, the spec's own tables merged over them key by key; ``unset =
+["mapping.mu", "methods.NAME"]`` then removes what the parent set and the spec does not
+want. Settings only: ``streams`` (not ``extends``) makes two experiments share their random
+draws and the records of their methods without a source."""
+
+
 def load_spec(path: str | Path) -> ExperimentSpec:
-    """Reads and validates one experiment spec (TOML)."""
+    """Reads and validates one experiment spec (TOML), resolving ``extends`` and ``unset``."""
     path = Path(path)
+    return parse_spec(_resolved_table(path, ()), str(path))
+
+
+def _read_table(path: Path) -> dict:
     try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError(f"{path}: no such spec file") from None
     except IsADirectoryError:  # [robustness]
@@ -555,7 +591,42 @@ def load_spec(path: str | Path) -> ExperimentSpec:
         raise SpecError(f"{path}: cannot read: {error.strerror or error}") from None
     except tomllib.TOMLDecodeError as error:
         raise SpecError(f"{path}: not valid TOML: {error}") from None
-    return parse_spec(table, str(path))
+
+
+def _resolved_table(path: Path, children: tuple[Path, ...]) -> dict:
+    """The spec's table with its parents' settings merged in (``EXTENDS``), as if written out flat."""
+    table = _read_table(path)
+    parent, unset = table.pop(EXTENDS, None), table.pop(UNSET, [])
+    if parent is None:
+        if unset:
+            raise SpecError(f"{path}: key '{UNSET}' needs '{EXTENDS}' (there is no parent to unset keys of)")
+        return table
+    if not isinstance(parent, str) or not parent:
+        _fail(str(path), EXTENDS, "the path of a parent spec, relative to this one", parent)
+    if not isinstance(unset, list) or not all(isinstance(k, str) and k for k in unset):
+        _fail(str(path), UNSET, "an array of dotted keys of the parent (e.g. 'mapping.mu')", unset)
+    parent_path = (path.parent / parent).resolve()
+    if parent_path in (*children, path.resolve()):
+        raise SpecError(f"{path}: key '{EXTENDS}' = {parent!r} extends itself (a cycle of specs)")
+    merged = _merged(_resolved_table(parent_path, (*children, path.resolve())), table)
+    for dotted in unset:
+        *outer, last = dotted.split(".")
+        holder = merged
+        for key in outer:
+            holder = holder.get(key) if isinstance(holder, dict) else None
+        if not isinstance(holder, dict) or last not in holder:
+            raise SpecError(f"{path}: key '{UNSET}' names {dotted!r}, which {parent} does not set")
+        del holder[last]
+    return merged
+
+
+def _merged(parent: dict, child: dict) -> dict:
+    """``child`` over ``parent``: tables merge key by key, anything else is replaced."""
+    out = dict(parent)
+    for key, value in child.items():
+        both = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merged(out[key], value) if both else value
+    return out
 
 
 def spec_to_dict(spec: ExperimentSpec) -> dict:

@@ -53,7 +53,8 @@ class TransferProblem:
         control steps, a known model where there is one.
       seed: seeds every random choice a method makes.
       target_return: U_M(pi), the mean return of a policy on the real target under
-        the experiment's evaluation protocol (no target samples are handed out).
+        the experiment's evaluation protocol (no target samples are handed out);
+        ``target_return(policy, episodes=k)`` over its first k episodes' starts.
       model_return: U_Mhat(pi), the same policy's mean return when ``model`` stands
         in for the target (the target task's reward and end conditions applied to
         the model's predicted states); None where the task has no such reward.
@@ -142,28 +143,32 @@ class TransferProblem:
         """Whether Algorithm 2's utility gap can be computed (both hooks given)."""
         return self.target_return is not None and self.model_return is not None
 
-    def utility_gap(self, model: Model, kind: str = "absolute") -> float:
+    def utility_gap(self, model: Model, kind: str = "absolute", episodes: int | None = None) -> float:
         """Algorithm 2's gap between U_M(pi) and U_Mhat(pi) for the projected source policy.
 
         ``"absolute"`` (the paper's): U_M - U_Mhat, compared one-sided with zeta;
         ``"relative"``: |U_M - U_Mhat| / |U_M|. Both come from the same start
-        states (the problem's hooks say which), and U_M's real-target rollouts are
-        counted against the method that asks. A model whose rollout diverges is as
-        far from the target as can be (1e300).
+        states (the problem's hooks say which), ``episodes`` of them (Algorithm 2's
+        k trials; None: the hooks' own number, the evaluation protocol's), and U_M's
+        real-target rollouts are counted against the method that asks. A model
+        whose rollout diverges is as far from the target as can be (1e300).
         """
-        return self.utility_gaps([model], kind)[0]
+        return self.utility_gaps([model], kind, episodes)[0]
 
-    def utility_gaps(self, models: Sequence[Model], kind: str = "absolute") -> list[float]:
+    def utility_gaps(self, models: Sequence[Model], kind: str = "absolute", episodes: int | None = None) -> list[float]:
         """:meth:`utility_gap` of each of ``models``, their U_Mhat in one ``model_returns`` call where given."""
         if not self.has_utility_gap:
             raise ValueError("this problem has no target_return/model_return hooks: no utility gap")
         assert self.target_return is not None and self.model_return is not None
         policy = self.projected_source_policy()
-        u_true = float(self.target_return(policy))
+        # Only a chosen number of episodes is passed on: hooks written before the
+        # keyword existed keep working with their own.
+        more = {} if episodes is None else {"episodes": episodes}
+        u_true = float(self.target_return(policy, **more))
         if self.model_returns is not None:
-            u_hats = list(self.model_returns(models, policy))
+            u_hats = list(self.model_returns(models, policy, **more))
         else:
-            u_hats = [self.model_return(model, policy) for model in models]
+            u_hats = [self.model_return(model, policy, **more) for model in models]
         return [_gap(u_true, u_hat, kind) for u_hat in u_hats]
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import typing
 from typing import Any, Callable
 
 from tatl_mj.transfer.method import TransferMethod
@@ -73,6 +74,11 @@ NAME is then a variant of it with these settings, reported under NAME (an ablati
 such as ``ta-tl-h-no-cart``). Without it, NAME is the built-in itself."""
 
 
+PAIR_KEYS = ("ablation", "placebo")
+"""Keys of a spec's ``[methods.NAME]`` table that declare which method NAME is judged against
+(its source-free ablation, its placebo; ``tatl_mj.experiments.verdicts``): not settings."""
+
+
 def base_of(name: str, settings: dict[str, Any] | None = None) -> str:
     """The built-in a method table builds: its ``method`` key, else its own name."""
     base = (settings or {}).get(VARIANT_KEY, name)
@@ -112,14 +118,43 @@ def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
     ``settings``; ValueError naming an unknown or bad setting."""
     base = base_of(name, settings)
     factory = _factory(base)
-    settings = {k: v for k, v in (settings or {}).items() if k != VARIANT_KEY}
+    settings = {k: v for k, v in (settings or {}).items() if k not in (VARIANT_KEY, *PAIR_KEYS)}
     valid = settings_of(base)
     unknown = sorted(set(settings) - set(valid))
     if unknown:
         raise ValueError(
-            f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: {sorted([*valid, VARIANT_KEY])}"
+            f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: "
+            f"{sorted([*valid, VARIANT_KEY, *PAIR_KEYS])}"
         )
-    return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
+    cls = factory.func if isinstance(factory, functools.partial) else factory
+    optional = _optional_fields(cls)
+    return factory(**{k: None if v == NONE and k in optional else _plain(v) for k, v in settings.items()}, name=name)
 
 
-__all__ = ["ABLATION_OF", "BASELINES", "METHODS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "build", "settings_of"]
+NONE = "none"
+"""How a spec (TOML, which has no null) says None for a setting that may be None
+(``zeta = "none"``: Algorithm 2 off, the apprentice fitted on every sample)."""
+
+
+@functools.cache
+def _optional_fields(cls: type) -> frozenset[str]:
+    """The settings of ``cls`` whose type admits None."""
+    hints = typing.get_type_hints(cls)
+    return frozenset(
+        f.name
+        for f in dataclasses.fields(cls)
+        if type(None) in typing.get_args(hints.get(f.name)) or hints.get(f.name) is type(None)
+    )
+
+
+__all__ = [
+    "ABLATION_OF",
+    "BASELINES",
+    "METHODS",
+    "PAIR_KEYS",
+    "SOURCE_FREE",
+    "VARIANT_KEY",
+    "base_of",
+    "build",
+    "settings_of",
+]

@@ -35,6 +35,9 @@ class TATL:
       gap: ``"absolute"``, the paper's one-sided U_M - U_Mhat <= zeta (in return
         units), or ``"relative"``, |U_M - U_Mhat| / |U_M| <= zeta.
       batch: Algorithm 2's sample increment (None: all samples at once).
+      utility_episodes: Algorithm 2's k trials: how many episodes of the projected
+        source policy U_M (real target, counted against the method) and U_Mhat (the
+        apprentice) average over; None: the experiment's evaluation protocol's.
       actions: ``"discrete"``: the action is snapped to the target's discrete
         action set, the one the FQI baselines choose from, so every method is
         compared within the same actions; ``"continuous"``: any value within the
@@ -50,6 +53,7 @@ class TATL:
     zeta: float | None = 0.1
     gap: str = "absolute"
     batch: int | None = None
+    utility_episodes: int | None = None
     actions: str = "discrete"
     adaptive_actions: tuple[float, ...] = ()
     source: str = "trained"
@@ -69,6 +73,8 @@ class TATL:
             number(owner, "zeta", self.zeta, 0.0, low_open=True)
         if self.batch is not None:
             integer(owner, "batch", self.batch, 1)
+        if self.utility_episodes is not None:
+            integer(owner, "utility_episodes", self.utility_episodes, 1)
         for i, value in enumerate(self.adaptive_actions):
             number(owner, f"adaptive_actions[{i}]", value)
 
@@ -101,19 +107,24 @@ class TATL:
             target_samples,
             actions,
             self.features(target),
-            functools.partial(problem.utility_gap, kind=self.gap),
+            functools.partial(problem.utility_gap, kind=self.gap, episodes=self.utility_episodes),
             self.zeta,
             self.batch or len(target_samples),
             self.ridge,
             periodic=periodic,
             gaps=self._known_gaps(problem, target_samples),
             # Sizes ahead of need are rolled out only where that costs about one rollout.
-            utility_gaps=functools.partial(problem.utility_gaps, kind=self.gap) if problem.model_returns else None,
+            utility_gaps=(
+                functools.partial(problem.utility_gaps, kind=self.gap, episodes=self.utility_episodes)
+                if problem.model_returns
+                else None
+            ),
         )
         # Every budget's Algorithm 2 uses U_M, even one whose gaps were all known:
         # the problem counts its real-target rollouts against this budget.
         assert problem.target_return is not None
-        problem.target_return(problem.projected_source_policy())
+        more = {} if self.utility_episodes is None else {"episodes": self.utility_episodes}
+        problem.target_return(problem.projected_source_policy(), **more)
         return learned
 
     def _known_gaps(self, problem: TransferProblem, target_samples: Transitions) -> dict[int, float]:
