@@ -75,3 +75,17 @@ def test_a_dynamics_version_must_be_a_whole_number_from_one():
         dataclasses.replace(description, dynamics_version=0)
     with pytest.raises(ValueError, match="dynamics_version must be a whole number, got 1.5"):
         dataclasses.replace(description, dynamics_version=1.5)
+
+
+def test_what_cannot_change_a_record_is_not_content():
+    table = tomllib.loads(FLIPPED.read_text())
+    original = spec_mod.parse_spec(table, "a.toml")
+    frozen = spec_mod.parse_spec({**table, "best_baseline": {"final": "rl"}}, "a.toml")
+    assert spec_mod.content_hash(frozen) == spec_mod.content_hash(original)
+
+
+def test_a_variant_that_extends_its_parent_hashes_as_the_same_settings_written_out(tmp_path):
+    parent = spec_mod.load_spec(FLIPPED)
+    child = tmp_path / "child.toml"
+    child.write_text(f'extends = "{FLIPPED}"\n')
+    assert spec_mod.content_hash(spec_mod.load_spec(child)) == spec_mod.content_hash(parent)

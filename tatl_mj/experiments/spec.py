@@ -634,8 +634,9 @@ def spec_to_dict(spec: ExperimentSpec) -> dict:
     return dataclasses.asdict(spec)
 
 
-NOT_CONTENT = ("path", "title", "paper_claim")
-"""Spec fields that cannot change a record: where it was read from, and its prose."""
+NOT_CONTENT = ("path", "title", "paper_claim", "paper", "best_baseline")
+"""Spec fields that cannot change a record: where it was read from, its prose, the paper's
+numbers, and the baseline its verdicts are read against (frozen after the tuning runs)."""
 
 
 def content_hash(spec: ExperimentSpec | dict, preset: str | None = None) -> str:
