@@ -227,45 +227,6 @@ def time_sampler(domain: str, task: str, seconds: float, threads: int, seed: int
     }
 
 
-def time_rollout(domain: str, task: str, seconds: float, threads: int, seed: int = 0) -> dict[str, Any]:
-    """Raw ``mujoco.rollout``: the bare model, open loop, constant control per control step."""
-    import mujoco
-    import mujoco.rollout
-
-    from tatl_mj import suite
-
-    env = suite.load(domain, task, task_kwargs={"random": seed})
-    physics = env.physics
-    model = physics.model.ptr
-    n_sub = int(round(env.control_timestep() / physics.timestep()))
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    n_batch = 256
-    starts = np.empty((n_batch, mujoco.mj_stateSize(model, spec)))
-    for row in starts:
-        env.reset()
-        mujoco.mj_getState(model, physics.data.ptr, row, spec)
-    rng = np.random.default_rng(seed)
-    actions = np.asarray(suite.action_set(domain), np.float64)
-    # Full control vectors (a task may add set-points, e.g. rider noise and speed).
-    controls = env.task.controls(actions, env.task.random)
-    datas = [mujoco.MjData(model) for _ in range(max(threads, 1))]
-    with mujoco.rollout.Rollout(nthread=threads) as pool:
-
-        def run(n_control: int) -> float:
-            picks = rng.integers(len(actions), size=(n_batch, n_control))
-            ctrl = np.repeat(controls[picks], n_sub, axis=1)
-            begin = time.perf_counter()
-            pool.rollout(model, datas, starts, ctrl)
-            return time.perf_counter() - begin
-
-        pilot = 10
-        rate = n_batch * pilot / run(pilot)
-        n_control = max(pilot, int(rate * seconds / n_batch))
-        elapsed = run(n_control)
-    steps = n_batch * n_control
-    return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed, "substeps": n_sub}
-
-
 def time_gymnasium(env_id: str, seconds: float, seed: int = 0) -> dict[str, Any]:
     """Gymnasium's own loop: ``env.step`` with random actions, resetting at episode ends.
 
@@ -414,13 +375,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _time_domain(domain: str, task: str, args: argparse.Namespace, emit: Callable[[dict], None]) -> dict[str, float]:
     """Times every stepping path of one domain's task (emitting each figure); returns its rates and ratios."""
-    from tatl_mj import suite
+    from tatl_mj import sampling, suite
 
     timers: dict[str, Any] = {
         "dm_control": functools.partial(time_dm_control, domain, task, args.seconds / 2),
         "dm_control_floor": functools.partial(time_dm_control_floor, domain, task, args.seconds / 2),
         "sampler": functools.partial(time_sampler, domain, task, args.seconds, args.threads),
-        "rollout": functools.partial(time_rollout, domain, task, args.seconds / 2, args.threads),
+        "rollout": functools.partial(sampling.time_rollout, domain, task, args.seconds / 2, args.threads),
     }
     peer_id = suite.describe(domain, task).gymnasium_peer
     if peer_id is not None:

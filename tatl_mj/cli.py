@@ -143,7 +143,7 @@ def _stopped(command: str, stop: Interrupted, out: str) -> int:
 def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict | None) -> tuple[dict, Any] | int:
     """Runs the checked specs with SIGINT and SIGTERM caught: (summary, the RunFailed or None),
     or the exit status of a run that stopped or could not start (its message printed)."""
-    from tatl_mj.experiments import lock, records, runner
+    from tatl_mj.experiments import executors, lock, records, runner
 
     failed: runner.RunFailed | None = None
     try:
@@ -162,7 +162,7 @@ def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict 
         failed, summary = error, error.summary
     except Interrupted as stop:
         return _stopped("run", stop, args.out)
-    except runner.ExecutorError as error:  # raised before any work starts
+    except (executors.ExecutorError, runner.RunFolderError) as error:  # raised before any work starts
         print(f"tatl run: {error}", file=sys.stderr)
         return 2
     except runner.MethodError as error:  # raised before any work starts
@@ -183,19 +183,19 @@ def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict 
 
 def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
     """Prints a finished run's timings, physics and notes; 1 when some unit failed, else 0."""
-    from tatl_mj.experiments import records, runner
+    from tatl_mj.experiments import costs, records
 
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
-    print(runner.format_timings(runner.timings(args.out)))
+    print(costs.format_timings(costs.timings(args.out)))
     path = Path(args.out) / "physics.json"
     try:
         previous = records.read_json(path)  # reused as it is where no unit ran since
     except (FileNotFoundError, records.RecordError):
         previous = None
-    physics = runner.physics_report(args.out, previous=previous if isinstance(previous, dict) else None)
+    physics = costs.physics_report(args.out, previous=previous if isinstance(previous, dict) else None)
     if physics is not previous:
         records.write_json(path, physics)
-    print(runner.format_physics(physics))
+    print(costs.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     from tatl_mj.experiments import summary as summary_mod
 

@@ -5,7 +5,7 @@ import pytest
 from conftest import tiny_spec
 
 from tatl_mj import sampling, suite
-from tatl_mj.experiments import records, runner
+from tatl_mj.experiments import costs, records, runner
 
 
 def _substeps(key: str) -> int:
@@ -36,18 +36,18 @@ def test_physics_report_prices_the_records_substeps_at_raw_speed(tmp_path, monke
     # Three timings of a drifting machine: the fastest, 1,000 substeps a second, prices the run.
     timings = iter([250.0, 500.0, 400.0])
     monkeypatch.setattr(
-        "tatl_mj.bench.time_rollout",
+        "tatl_mj.sampling.time_rollout",
         lambda domain, task, seconds, threads: {"steps_per_s": next(timings), "substeps": 2},
     )
-    report = runner.physics_report(tmp_path)
+    report = costs.physics_report(tmp_path)
     assert report["work_s"] == 4.0 and report["physics_s"] == pytest.approx(4.0)
     assert report["ratio"] == pytest.approx(1.0)
     assert report["by_task"]["pendulum/swingup"]["substeps"] == 4000
     assert report["records_without_counts"] == 1
-    assert "work / physics = 1.00x (1 older records without counts left out of both)" in runner.format_physics(report)
+    assert "work / physics = 1.00x (1 older records without counts left out of both)" in costs.format_physics(report)
     # A ratio just above a 3x target reads as above it.
     above = {**report, "work_s": 3977.6, "physics_s": 1308.4, "ratio": 3977.6 / 1308.4, "records_without_counts": 0}
-    assert "work / physics = 3.04x" in runner.format_physics(above)
+    assert "work / physics = 3.04x" in costs.format_physics(above)
 
 
 def test_a_unit_records_the_seconds_of_its_fqi_fits(tmp_path):
@@ -71,22 +71,22 @@ def test_the_physics_report_adds_the_fits_to_the_physics_where_every_record_time
         path.parent.mkdir(parents=True, exist_ok=True)
         records.write_json(path, {"wall_s": 5.0, "fqi_s": fits, "physics_substeps": {"pendulum/swingup": 1000}})
     monkeypatch.setattr(
-        "tatl_mj.bench.time_rollout", lambda domain, task, seconds, threads: {"steps_per_s": 500.0, "substeps": 2}
+        "tatl_mj.sampling.time_rollout", lambda domain, task, seconds, threads: {"steps_per_s": 500.0, "substeps": 2}
     )
-    report = runner.physics_report(tmp_path)
+    report = costs.physics_report(tmp_path)
     assert report["fqi_s"] == 3.5 and report["floor_s"] == pytest.approx(5.5)
-    assert runner.format_physics(report).splitlines()[1] == (
+    assert costs.format_physics(report).splitlines()[1] == (
         "FQI's fits: 3.5 s of the work; physics at raw speed + FQI's fits = 5.5 s; everything else 4.5 s"
     )
     # Timed on a machine that slowed after the run, the physics can cost more than the work left for it.
     slow = {**report, "physics_s": 8.0, "floor_s": 11.5}
     assert (
-        runner.format_physics(slow)
+        costs.format_physics(slow)
         .splitlines()[1]
         .endswith("everything else -1.5 s (below 0: MuJoCo ran slower when timed than during the run)")
     )
     # A record written before fits were timed: no floor, rather than a floor too low.
     records.write_json(run.record_path("exp", 0, "uma-tl"), {"wall_s": 1.0, "physics_substeps": {}})
-    report = runner.physics_report(tmp_path)
+    report = costs.physics_report(tmp_path)
     assert report["fqi_s"] is None and report["floor_s"] is None
-    assert len(runner.format_physics(report).splitlines()) == 1
+    assert len(costs.format_physics(report).splitlines()) == 1

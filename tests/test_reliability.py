@@ -284,7 +284,7 @@ def test_run_recomputes_corrupt_records_and_caches(tmp_path):
 def test_a_run_stopped_inside_a_write_leaves_no_temporary_file(tmp_path, monkeypatch):
     from tatl_mj.experiments import runner
 
-    def stopped_mid_write(specs, preset, seeds, run_dir, *rest):
+    def stopped_mid_write(specs, preset, seeds, run_dir, *rest, **settings):
         tmp = run_dir.record_path(specs[0].name, 0, "rl").with_name(".rl.json.0123abcd.tmp")
         tmp.parent.mkdir(parents=True)
         tmp.write_text('{"cur')

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, TINY, tiny_spec, write_tiny
 
-from tatl_mj.experiments import records, runner, tables
+from tatl_mj.experiments import costs, records, runner, tables
 from tatl_mj.experiments import spec as spec_mod
 
 
@@ -45,7 +45,7 @@ def test_local_run_writes_records_and_summary(tmp_path):
 
 def test_mixing_presets_in_one_folder_is_refused(tmp_path):
     records.write_json(tmp_path / "run.json", {"preset": "paper", "experiments": []})
-    with pytest.raises(SystemExit, match="preset 'paper'"):
+    with pytest.raises(runner.RunFolderError, match="preset 'paper'"):
         runner.run([tiny_spec()], "tiny", [0], tmp_path, workers=1, progress=False)
 
 
@@ -208,10 +208,10 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
 def test_timings_break_a_run_down_by_phase(tmp_path):
     spec = tiny_spec()
     runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
-    table = runner.timings(tmp_path)["ip_to_flipped_ip"]
+    table = costs.timings(tmp_path)["ip_to_flipped_ip"]
     assert {"source_learning", "target_sampling", "mapping", "rl learn", "rl evaluate"} <= set(table)
     assert all(seconds >= 0 for seconds in table.values()) and table["rl learn"] > 0
-    assert "ip_to_flipped_ip:" in runner.format_timings({"ip_to_flipped_ip": table})
+    assert "ip_to_flipped_ip:" in costs.format_timings({"ip_to_flipped_ip": table})
 
 
 def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):

@@ -21,13 +21,11 @@ from __future__ import annotations
 import collections
 import dataclasses
 import json
-import os
 import pickle
 import platform
 import sys
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -35,24 +33,30 @@ from typing import Any, Callable, Iterable
 from tqdm import tqdm
 
 from tatl_mj import sampling
-from tatl_mj.experiments import lock, pipeline, reaper
+from tatl_mj.experiments import executors, lock, pipeline, verdicts
 from tatl_mj.experiments import summary as summary_mod
-from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.kernels import kernels
-from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, read_record, write_atomic, write_json
+from tatl_mj.experiments.records import (
+    SCHEMA_VERSION,
+    SOURCE_UNIT,
+    RecordError,
+    RunDirectory,
+    read_json,
+    read_record,
+    write_atomic,
+    write_json,
+)
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import fit_time, registry
 from tatl_mj.transfer.method import contract
-
-EXECUTORS = ("local", "ray")
 
 
 class MethodError(ValueError):
     """A method asked for that a spec cannot run (raised before any work starts)."""
 
 
-class ExecutorError(RuntimeError):
-    """The executor cannot start: e.g. no Ray cluster answers at ``address`` (raised before any work)."""
+class RunFolderError(ValueError):
+    """``--out`` holds a run that this one cannot join (another preset); raised before any work."""
 
 
 class RunFailed(RuntimeError):
@@ -142,123 +146,6 @@ def _work(
     return {"record": record, "blob": blob}
 
 
-# --- executors ------------------------------------------------------------------
-
-Job = tuple[Unit, tuple]
-
-
-Then = Callable[[Unit, dict], list[Job]]
-"""What a dispatcher calls with each finished unit's result: it records the result
-and returns the jobs that unit has unlocked (a source's methods), to run next."""
-
-
-def _local(jobs: list[Job], workers: int, then: Then) -> None:
-    if workers <= 1:
-        queue = collections.deque(jobs)
-        while queue:
-            unit, args = queue.popleft()
-            queue.extend(then(unit, work(*args)))
-        return
-    import multiprocessing
-
-    # spawn: MuJoCo/GL state must not be forked into workers.
-    # [robustness] workers die with this process, however it dies.
-    # One pool for sources and methods: a method starts as soon as its source is done.
-    with ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=workers_mod.die_with_parent,
-        initargs=(os.getpid(),),
-    ) as pool:
-        futures = {pool.submit(work, *args): unit for unit, args in jobs}
-        while futures:
-            done, _ = wait(futures, return_when=FIRST_COMPLETED)
-            for future in done:
-                unit = futures.pop(future)
-                try:
-                    result = future.result()
-                except Exception:  # noqa: BLE001 - e.g. a worker killed by the OS
-                    result = {"error": traceback.format_exc()}
-                for next_unit, args in then(unit, result):
-                    futures[pool.submit(work, *args)] = next_unit
-
-
-CONNECT_TIMEOUT_S = 10.0
-
-
-def check_address(address: str) -> None:
-    """Raises ExecutorError unless something accepts connections at a Ray ``address``.
-
-    ``ray.init`` retries an address where nothing listens for minutes (measured with
-    Ray 2.60); one TCP connection here, to the address given and nowhere else, says
-    at once. ``auto`` and ``local`` are left to Ray.
-    """
-    import socket
-
-    if address in ("auto", "local"):
-        return
-    where = address.split("://", 1)[-1]  # ray://host:port (Ray Client) or host:port
-    host, _, port = where.rpartition(":")
-    if not host or not port.isdigit():
-        raise ExecutorError(
-            f"--address {address!r}: expected host:port (e.g. 127.0.0.1:6379), 'auto' or ray://host:port"
-        )
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
-    except OSError as error:
-        raise ExecutorError(
-            f"no Ray cluster answers at --address {address} ({error.strerror or error}); "
-            "start one there (ray start --head --port PORT) or give its address"
-        ) from None
-
-
-def _ray(jobs: list[Job], workers: int, address: str | None, then: Then) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise SystemExit(
-            "--executor ray needs Ray: pip install 'tatl-mj[ray]' (or pip install 'ray>=2.9,<3')"
-        ) from None
-    started = not ray.is_initialized()
-    # [robustness] a local instance's agents would outlive a killed run by 20-30 s.
-    watcher = reaper.start() if started and not address else None
-    if started:
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-        if address:
-            kwargs["address"] = address
-        else:
-            kwargs["num_cpus"] = max(workers, 1)
-        try:
-            ray.init(**kwargs)
-        except Exception as error:  # noqa: BLE001 - Ray raises several kinds (ConnectionError, RuntimeError)
-            ray.shutdown()
-            if watcher is not None:
-                watcher.terminate()
-                watcher.wait()
-            first = (str(error).strip().splitlines() or [type(error).__name__])[0]
-            where = f"at {address}" if address else "(a local instance)"
-            raise ExecutorError(f"cannot start Ray {where}: {first}") from None
-    try:
-        remote = ray.remote(num_cpus=1)(work)
-        refs = {remote.remote(*args): unit for unit, args in jobs}
-        while refs:
-            done, _ = ray.wait(list(refs), num_returns=1)
-            for ref in done:
-                unit = refs.pop(ref)
-                try:
-                    result = ray.get(ref)
-                except Exception:  # noqa: BLE001 - a lost node or worker
-                    result = {"error": traceback.format_exc()}
-                for next_unit, args in then(unit, result):
-                    refs[remote.remote(*args)] = next_unit
-    finally:
-        if started:
-            ray.shutdown()
-        if watcher is not None:
-            watcher.terminate()
-            watcher.wait()
-
-
 # --- the run ----------------------------------------------------------------------
 
 
@@ -292,7 +179,7 @@ def _check_manifest(run_dir: RunDirectory, preset: str, specs: list[ExperimentSp
     if run_dir.manifest.exists():
         old = read_json(run_dir.manifest)
         if old.get("preset") != preset:
-            raise SystemExit(
+            raise RunFolderError(
                 f"{run_dir.root} holds a run with preset {old.get('preset')!r}; use another --out for preset {preset!r}"
             )
         experiments = sorted(set(old.get("experiments", [])) | {s.name for s in specs})
@@ -403,23 +290,13 @@ def _check_applies(spec: ExperimentSpec, name: str) -> None:
         raise MethodError(f"method {name!r} cannot run on {spec.name}: {error}") from None
 
 
-def _dispatcher(executor: str, workers: int, address: str | None) -> Callable[[list[Job], Then], None]:
-    if executor not in EXECUTORS:
-        raise ValueError(f"unknown executor {executor!r}; valid executors: {list(EXECUTORS)}")
-    if executor == "ray" and address:
-        check_address(address)  # before the run touches its folder
-    if executor == "ray":
-        return lambda jobs, then: _ray(jobs, workers, address, then)
-    return lambda jobs, then: _local(jobs, workers, then)
-
-
 class _Recorder:
     """Writes each finished unit (atomically) and collects failures; only the main process writes."""
 
     def __init__(self, run_dir: RunDirectory, done: set[Unit], bar: Any) -> None:
         self.run_dir, self.done, self.bar = run_dir, done, bar
         self.failures: list[str] = []
-        self.failed = self.skipped = 0
+        self.failed = self.skipped = self.copied = 0
 
     def __call__(self, unit: Unit, result: dict) -> None:
         run_dir = self.run_dir
@@ -441,6 +318,7 @@ class _Recorder:
         found = read_record(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
         self.run_dir.write_unit(unit.experiment, unit.seed, unit.name, shared_record(found, unit, origin))
         self.done.add(unit)
+        self.copied += 1
         self.run_dir.failure_path(unit.experiment, unit.seed, unit.name).unlink(missing_ok=True)
         self.bar.update(1)
 
@@ -471,7 +349,7 @@ def run(
     ``tatl_mj.transfer.method.TransferMethod`` (picklable, to run in worker processes).
     A spec with a ``[sweep]`` runs as one experiment per condition (``spec.conditions``).
     """
-    dispatch = _dispatcher(executor, workers, address)
+    dispatch = executors.dispatcher(executor, workers, address)
     specs = [condition for spec in specs for condition in conditions(spec)]  # a sweep: one per condition
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
@@ -486,7 +364,9 @@ def run(
     with lock.hold(run_dir.root):  # [robustness] one run per --out; raises lock.LockHeld
         run_dir.remove_temporaries()  # a crashed run's half-written files
         try:
-            return _run_locked(specs, preset, seeds, run_dir, workers, executor, all_units, custom, progress, dispatch)
+            return _run_locked(
+                specs, preset, seeds, run_dir, all_units, custom, progress, dispatch, workers=workers, executor=executor
+            )
         finally:
             # A stop signal raises from its handler, which can land inside a write's cleanup.
             run_dir.remove_temporaries()
@@ -497,219 +377,140 @@ def _run_locked(
     preset: str,
     seeds: list[int],
     run_dir: RunDirectory,
-    workers: int,
-    executor: str,
     all_units: list[Unit],
     custom: dict[str, Any],
     progress: bool,
-    dispatch: Callable[[list[Job], Then], None],
+    dispatch: Callable[[executors.Work, list[executors.Job], executors.Then], None],
+    **settings: Any,
 ) -> dict:
+    """Runs every unit not done yet and writes the summary; ``settings`` (workers, executor) are
+    recorded in it."""
     _check_manifest(run_dir, preset, specs)
     start = time.perf_counter()
-    by_name = {s.name: s for s in specs}
     done = {u for u in all_units if run_dir.is_done(u.experiment, u.seed, u.name)}  # validated on read
     bar = tqdm(total=len(all_units), initial=len(done), desc="work units", unit="unit", disable=not progress)
-    record = _Recorder(run_dir, done, bar)
-
-    # A method without a source runs once for experiments that share its streams and
-    # target: the others get its record (now, where one of them is done already).
-    # A source unit of such experiments takes its source Q and target samples from the
-    # first of them (once that is done) and learns only its own mapping.
-    copies: dict[Unit, list[Unit]] = {}
-    later_sources: dict[Unit, list[Unit]] = {}
-    for group in _shared(by_name, preset, all_units, custom):
-        finished = [u for u in group if u in done]
-        origin = finished[0] if finished else group[0]
-        rest = [u for u in group if u not in done and u != origin]
-        (later_sources if origin.name == SOURCE_UNIT else copies)[origin] = rest
-    for origin, aliases in copies.items():
-        if origin in done:
-            for alias in aliases:
-                record.copy(origin, alias)
-    followers = {alias for aliases in copies.values() for alias in aliases}
-
-    # Each experiment and seed's method units wait for its source unit, and start when it is done.
-    waiting: dict[tuple[str, int], list[Unit]] = {}
-    for unit in all_units:
-        if unit.name != SOURCE_UNIT and unit not in done and unit not in followers:
-            waiting.setdefault((unit.experiment, unit.seed), []).append(unit)
-
-    def methods_of(source: Unit) -> list[Job]:
-        units = waiting.pop((source.experiment, source.seed), [])
-        if source not in done:
-            for unit in units:
-                record.skip(unit, "its source unit failed")
-                for alias in copies.get(unit, []):
-                    record.skip(alias, f"the unit it shares, {unit}, did not finish")
-            return []
-        blob = run_dir.read_blob(source.experiment, source.seed) if units else None
-        return [(u, (by_name[u.experiment], preset, u, blob, custom.get(u.name))) for u in units]
-
-    def sources_after(origin: Unit) -> list[Job]:
-        """The source units waiting for ``origin``'s artefacts (computed alone if it failed)."""
-        blob = run_dir.read_blob(origin.experiment, origin.seed) if origin in done else None
-        return [(u, (by_name[u.experiment], preset, u, blob)) for u in later_sources.get(origin, [])]
-
-    def then(unit: Unit, result: dict) -> list[Job]:
-        record(unit, result)
-        for alias in copies.get(unit, []):
-            if unit in done:
-                record.copy(unit, alias)
-            else:
-                record.skip(alias, f"the unit it shares, {unit}, did not finish")
-        return methods_of(unit) + sources_after(unit) if unit.name == SOURCE_UNIT else []
-
-    sources = [u for u in all_units if u.name == SOURCE_UNIT]
-    waiting_sources = {u for later in later_sources.values() for u in later}
-    jobs = [(u, (by_name[u.experiment], preset, u, None)) for u in sources if u not in done | waiting_sources]
-    for source in sources:
-        if source in done:
-            jobs += methods_of(source) + sources_after(source)
-    dispatch(jobs, then)
+    recorder = _Recorder(run_dir, done, bar)
+    scheduler = Scheduler({s.name: s for s in specs}, preset, run_dir, all_units, custom, recorder)
+    jobs = scheduler.first_jobs()
+    if jobs:
+        dispatch(work, jobs, scheduler.then)
     bar.close()
 
     method_names = list(dict.fromkeys(u.name for u in all_units if u.name != SOURCE_UNIT))
-    summary = summary_mod.build(
-        run_dir,
-        specs=[spec_to_dict(s) for s in specs],
-        preset=preset,
-        seeds=seeds,
-        methods=method_names,
-        versions=_versions(),
-        kernels=_kernel_counts(run_dir, all_units),
-        wall_s=time.perf_counter() - start,
-        workers=workers,
-        executor=executor,
-        failures=record.failures,
-    )
+    inputs = dict(specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=method_names)
+    extra = dict(wall_s=time.perf_counter() - start, failures=recorder.failures, **settings)
+    ran = bool(jobs) or recorder.copied
+    summary = None if ran else _unchanged_summary(run_dir, inputs, all_units)
+    if summary is None:
+        summary = summary_mod.build(
+            run_dir, **inputs, versions=_versions(), kernels=_kernel_counts(run_dir, all_units), **extra
+        )
+    else:
+        summary.update(extra)
     write_json(run_dir.summary, summary)
-    if record.failed or record.skipped:
-        raise RunFailed(summary, record.failed, record.skipped, len(all_units), run_dir.root / "failures")
+    if recorder.failed or recorder.skipped:
+        raise RunFailed(summary, recorder.failed, recorder.skipped, len(all_units), run_dir.root / "failures")
     return summary
 
 
-def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
-    """Summed seconds per experiment and phase from a run's records (all seeds): source
-    learning, target sampling, mapping, the random reference, and each method's learning
-    and evaluation. What ``tatl run`` prints at its end."""
-    out: dict[str, dict[str, float]] = {}
-    root = RunDirectory(run_dir).root / "records"
-    for path in sorted(root.glob("*/seed*/*.json")):
-        experiment, unit = path.parent.parent.name, path.stem
-        try:
-            record = read_json(path)
-        except ValueError:
-            continue  # a corrupt record is named and recomputed by the next run
-        phases = out.setdefault(experiment, {})
-        if unit == SOURCE_UNIT:
-            for key, value in record.get("timings", {}).items():
-                phases[key.removesuffix("_s")] = phases.get(key.removesuffix("_s"), 0.0) + float(value)
-            continue
-        for part in ("learn", "evaluate"):
-            key = f"{unit} {part}"
-            phases[key] = phases.get(key, 0.0) + sum(float(p.get(f"{part}_s", 0.0)) for p in record.get("curve", []))
-    return out
-
-
-def physics_report(
-    run_dir: str | Path, seconds: float = 0.3, repeats: int = 3, previous: dict[str, Any] | None = None
-) -> dict[str, Any]:
-    """A run's work against its physics: the summed unit wall times (``work_s``), and the
-    MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
-    (``physics_s``: per task, the fastest of ``repeats`` timings of ``seconds`` each, taken
-    now), and their ratio. Records without a substep count (older ones) are left out of both.
-
-    ``fqi_s`` is the part of the work spent in FQI's fits, and ``floor_s`` the physics and
-    those fits together: all but the rest of the work, which is what code that keeps
-    the fits can save (both None when some counted records do not time their fits).
-
-    ``previous``: an earlier report of this folder (its physics.json), returned as it is
-    when the records hold the same work (no unit ran since), so a finished run's rerun
-    does not time the physics again."""
-    from tatl_mj import bench
-
-    counted = _physics_counts(run_dir)
-    if previous is not None and {k: previous.get(k) for k in counted} == counted:
-        return previous
-    by_task = {}
-    for key, n in sorted(counted["substeps"].items()):
-        domain, task = key.split("/", 1)
-        # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
-        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
-        timed = max(tries, key=lambda t: t["steps_per_s"])
-        rate = timed["steps_per_s"] * timed["substeps"]
-        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
-    physics_s = sum(v["raw_s"] for v in by_task.values())
-    work_s, fqi_s = counted["work_s"], counted["fqi_s"]
-    return {
-        **counted,
-        "physics_s": physics_s,
-        "ratio": work_s / physics_s if physics_s else None,
-        "floor_s": None if fqi_s is None else physics_s + fqi_s,
-        "by_task": by_task,
-    }
-
-
-def _physics_counts(run_dir: str | Path) -> dict[str, Any]:
-    """What :func:`physics_report` sums from the records: work, FQI's part, substeps by task,
-    and how many records have no substep count."""
-    substeps: dict[str, int] = {}
-    work_s, fqi_s, uncounted, untimed = 0.0, 0.0, 0, 0
-    for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
-        try:
-            record = read_json(path)
-        except ValueError:
-            continue
-        if "physics_substeps" not in record:
-            uncounted += 1  # written before substeps were counted: neither side counts it
-            continue
-        work_s += float(record.get("wall_s", 0.0))
-        if "fqi_s" in record:
-            fqi_s += float(record["fqi_s"])
-        else:
-            untimed += 1
-        for key, n in record["physics_substeps"].items():
-            substeps[key] = substeps.get(key, 0) + int(n)
-    return {
-        "work_s": work_s,
-        "fqi_s": None if untimed else fqi_s,
-        "substeps": dict(sorted(substeps.items())),
-        "records_without_counts": uncounted,
-    }
-
-
-def format_physics(report: dict[str, Any]) -> str:
-    """Work, physics at raw speed and their ratio; then, where every record times them,
-    FQI's fits and the floor they make with the physics."""
-    if not report["physics_s"]:
-        return f"work: {report['work_s']:.1f} s; no MuJoCo substeps recorded (tasks without physics, or older records)"
-    substeps = sum(v["substeps"] for v in report["by_task"].values())
-    left_out = report.get("records_without_counts", 0)
-    note = f" ({left_out} older records without counts left out of both)" if left_out else ""
-    line = (
-        f"work: {report['work_s']:.1f} s over the records; physics: {substeps:,} MuJoCo substeps = "
-        f"{report['physics_s']:.1f} s at raw mujoco.rollout speed (1 thread); "
-        # Two decimals: the target is 3x, and 3.04 must not print as 3.0.
-        f"work / physics = {report['ratio']:.2f}x{note}"
+def _unchanged_summary(run_dir: RunDirectory, inputs: dict, all_units: list[Unit]) -> dict | None:
+    """The folder's summary.json when a rerun in which no unit ran would write the same one: the
+    same specs, preset, seeds and methods, verdict rule and record schema, and every unit done.
+    Its statistics (bootstrap intervals) are then not computed again."""
+    try:
+        old = read_json(run_dir.summary)
+    except (FileNotFoundError, RecordError):
+        return None
+    inputs = json.loads(json.dumps(inputs))  # as summary.json holds them (tuples as lists)
+    same = (
+        isinstance(old, dict)
+        and old.get("verdict_rule_version") == verdicts.VERDICT_RULE_VERSION
+        and old.get("schema_version") == SCHEMA_VERSION
+        and not old.get("failures")
+        and [old.get("experiments", {}).get(s["name"], {}).get("spec") for s in inputs["specs"]] == inputs["specs"]
+        and all(old.get(key) == value for key, value in inputs.items() if key != "specs")
+        and len(old.get("experiments", {})) == len(inputs["specs"])
+        and all(run_dir.is_done(u.experiment, u.seed, u.name) for u in all_units)
     )
-    if report.get("floor_s") is None:
-        return line
-    rest = report["work_s"] - report["floor_s"]
-    # Raw speed is timed after the run: on a machine that slowed since, it prices the physics above its cost.
-    why = " (below 0: MuJoCo ran slower when timed than during the run)" if rest < 0 else ""
-    return (
-        f"{line}\nFQI's fits: {report['fqi_s']:.1f} s of the work; physics at raw speed + FQI's fits = "
-        f"{report['floor_s']:.1f} s; everything else {rest:.1f} s{why}"
-    )
+    return old if same else None
 
 
-def format_timings(table: dict[str, dict[str, float]]) -> str:
-    """The breakdown as text: per experiment, its phases from the slowest, with their share."""
-    lines = []
-    for experiment, phases in table.items():
-        total = sum(phases.values()) or 1.0
-        lines.append(f"{experiment}: {total:.1f} s of work")
-        for phase, seconds in sorted(phases.items(), key=lambda kv: -kv[1]):
-            if seconds >= 0.05 * total:
-                lines.append(f"  {phase:<32} {seconds:8.1f} s  {100 * seconds / total:4.0f}%")
-    return "\n".join(lines)
+class Scheduler:
+    """Which units run when: sources first, each source's method units as soon as it is done,
+    and the work experiments share done once (:func:`_shared`).
+
+    A method without a source runs once for experiments that share its streams and target:
+    the others get a copy of its record (at once, where the first is done already). A source
+    unit of such experiments takes its source Q and target samples from the first of them
+    (once that is done) and learns only its own mapping.
+    """
+
+    def __init__(
+        self,
+        by_name: dict[str, ExperimentSpec],
+        preset: str,
+        run_dir: RunDirectory,
+        all_units: list[Unit],
+        custom: dict[str, Any],
+        recorder: _Recorder,
+    ) -> None:
+        self.by_name, self.preset, self.run_dir, self.custom, self.recorder = by_name, preset, run_dir, custom, recorder
+        self.all_units, done = all_units, recorder.done
+        self.copies: dict[Unit, list[Unit]] = {}
+        self.later_sources: dict[Unit, list[Unit]] = {}
+        for group in _shared(by_name, preset, all_units, custom):
+            finished = [u for u in group if u in done]
+            origin = finished[0] if finished else group[0]
+            rest = [u for u in group if u not in done and u != origin]
+            (self.later_sources if origin.name == SOURCE_UNIT else self.copies)[origin] = rest
+        for origin, aliases in self.copies.items():
+            if origin in done:
+                for alias in aliases:
+                    recorder.copy(origin, alias)
+        followers = {alias for aliases in self.copies.values() for alias in aliases}
+        # Each experiment and seed's method units wait for its source unit.
+        self.waiting: dict[tuple[str, int], list[Unit]] = {}
+        for unit in all_units:
+            if unit.name != SOURCE_UNIT and unit not in done and unit not in followers:
+                self.waiting.setdefault((unit.experiment, unit.seed), []).append(unit)
+
+    def first_jobs(self) -> list[executors.Job]:
+        """The sources not done (but those waiting for another's artefacts), and the methods of those done."""
+        done = self.recorder.done
+        sources = [u for u in self.all_units if u.name == SOURCE_UNIT]
+        waiting_sources = {u for later in self.later_sources.values() for u in later}
+        jobs = [self._job(u, None) for u in sources if u not in done | waiting_sources]
+        for source in sources:
+            if source in done:
+                jobs += self._methods_of(source) + self._sources_after(source)
+        return jobs
+
+    def then(self, unit: Unit, result: dict) -> list[executors.Job]:
+        """Records a finished unit (and its copies); returns the jobs it unlocked."""
+        self.recorder(unit, result)
+        for alias in self.copies.get(unit, []):
+            if unit in self.recorder.done:
+                self.recorder.copy(unit, alias)
+            else:
+                self.recorder.skip(alias, f"the unit it shares, {unit}, did not finish")
+        return self._methods_of(unit) + self._sources_after(unit) if unit.name == SOURCE_UNIT else []
+
+    def _job(self, unit: Unit, blob: bytes | None) -> executors.Job:
+        args = (self.by_name[unit.experiment], self.preset, unit, blob)
+        return unit, args if unit.name == SOURCE_UNIT else (*args, self.custom.get(unit.name))
+
+    def _methods_of(self, source: Unit) -> list[executors.Job]:
+        units = self.waiting.pop((source.experiment, source.seed), [])
+        if source not in self.recorder.done:
+            for unit in units:
+                self.recorder.skip(unit, "its source unit failed")
+                for alias in self.copies.get(unit, []):
+                    self.recorder.skip(alias, f"the unit it shares, {unit}, did not finish")
+            return []
+        blob = self.run_dir.read_blob(source.experiment, source.seed) if units else None
+        return [self._job(u, blob) for u in units]
+
+    def _sources_after(self, origin: Unit) -> list[executors.Job]:
+        """The source units waiting for ``origin``'s artefacts (computed alone if it failed)."""
+        blob = self.run_dir.read_blob(origin.experiment, origin.seed) if origin in self.recorder.done else None
+        return [self._job(u, blob) for u in self.later_sources.get(origin, [])]

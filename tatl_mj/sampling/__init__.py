@@ -34,6 +34,7 @@ from tatl_mj.sampling.evaluation import Joint, evaluate, evaluate_policies, one_
 from tatl_mj.sampling.queries import step_from, step_values_from
 from tatl_mj.sampling.schedule import DEFAULT_PARALLEL
 from tatl_mj.sampling.simulator import is_batched, mujoco_threads, physics_substeps
+from tatl_mj.sampling.timing import time_rollout
 
 __all__ = [
     "DEFAULT_PARALLEL",
@@ -52,4 +53,5 @@ __all__ = [
     "start_states",
     "step_from",
     "step_values_from",
+    "time_rollout",
 ]
