@@ -36,7 +36,6 @@ import collections
 import contextlib
 import contextvars
 import functools
-import inspect
 import weakref
 from typing import Any, Callable, Iterator
 
@@ -197,11 +196,7 @@ class Simulator:
 
     def time_limit(self) -> Any:
         """The task's ``time_limit`` argument: as given, else its factory's default."""
-        time_limit = self.kwargs.get("time_limit")
-        if time_limit is None:
-            factory = suite.domain(self.domain).TASKS[self.task_name]
-            time_limit = inspect.signature(factory).parameters["time_limit"].default
-        return time_limit
+        return suite.time_limit(self.domain, self.task_name, self.kwargs)
 
     def step_limit(self, max_episode_steps: int | None) -> float:
         """Steps after which an episode ends by time limit, as dm_control counts them.
