@@ -308,19 +308,22 @@ class Canvas:
         self._pixels = np.empty((height, width, 3), np.uint8)
         _OPEN.add(self)
 
-    def draw(self, data: Any, camera: int = -1) -> np.ndarray:
+    def draw(self, data: Any, camera: int = -1, model: Any = None) -> np.ndarray:
+        """``data``'s frame; ``model``, where given, replaces the canvas's for this frame: one of
+        the same layout whose sizes or masses differ (the time-varying pendulum's steps)."""
         mujoco = self._mujoco
+        model = self.model if model is None else model
         if self._context is None:
             raise ValueError("this canvas is closed")
         self._context.make_current()
         if camera < 0:
             self._camera.type = mujoco.mjtCamera.mjCAMERA_FREE
-            mujoco.mjv_defaultFreeCamera(self.model, self._camera)
+            mujoco.mjv_defaultFreeCamera(model, self._camera)
         else:
             self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
             self._camera.fixedcamid = camera
         mujoco.mjv_updateScene(
-            self.model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
+            model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
         )
         mujoco.mjr_render(self._rect, self._scene, self._render_context)
         mujoco.mjr_readPixels(self._pixels, None, self._rect, self._render_context)

@@ -207,7 +207,8 @@ class TatlEnv(gymnasium.Env):
         self._env.physics.free_canvases()
 
     def _observation(self, timestep: Any) -> np.ndarray:
-        return np.asarray(timestep.observation["state"], dtype=np.float64)
+        # A copy: a diverged step returns the last observation object again.
+        return np.array(timestep.observation["state"], dtype=np.float64)
 
 
 def actuator_values(action: Any, space: spaces.Box, scale: np.ndarray) -> np.ndarray:
