@@ -71,7 +71,7 @@ LLVM_FIRST: tuple[str, ...] = ("triton",)
 _PROBE = """\
 import sys
 from tatl_mj import gl
-sys.exit(gl.test_frame(sys.argv[1]))
+sys.exit(gl.probe_frame(sys.argv[1]))
 """
 
 _FIX = (
@@ -83,6 +83,7 @@ _FIX = (
 
 # The backend this process draws with, once it drew a frame: {name: its GLContext class}.
 _LOADED: dict[str, Any] = {}
+_PROBED: set[str] = set()  # backends whose probe drew a frame (probed once a process)
 _OPEN: weakref.WeakSet = weakref.WeakSet()  # canvases to free before the backend's own exit hooks run
 
 
@@ -174,8 +175,9 @@ def select_backend(environ: MutableMapping[str, str] = os.environ) -> str:
     candidates = (requested,) if requested else AUTO_ORDER
     errors = []
     for name in candidates:
-        error = probe(name, environ)
+        error = None if name in _PROBED else probe(name, environ)
         if error is None:
+            _PROBED.add(name)
             _set(environ, name)
             return name
         errors.append(f"  {name}: {error}")
@@ -215,7 +217,7 @@ def probe(name: str, environ: MutableMapping[str, str] = os.environ) -> str | No
     return _last_error_line(result.stderr) or f"probe exited with status {result.returncode}"
 
 
-def test_frame(name: str) -> str | None:
+def probe_frame(name: str) -> str | None:
     """Draws one 8x8 frame with backend ``name`` in this process; None, or why it failed (the probe)."""
     library = LIBRARIES.get(name)
     error = library and library_error(library)
