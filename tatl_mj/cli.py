@@ -210,9 +210,7 @@ def _methods(text: str | None) -> dict | None:
     instance whose ``name`` names it in the results. None (no --methods): each
     spec's own ``[methods]``.
     """
-    import importlib
-
-    from tatl_mj.transfer.method import TransferMethod
+    from tatl_mj.transfer import registry
 
     if text is None:
         return None
@@ -221,14 +219,7 @@ def _methods(text: str | None) -> dict | None:
         if ":" not in entry:
             methods[entry] = None  # a built-in or a spec's variant: the runner checks it against each spec
             continue
-        module_name, _, attr = entry.partition(":")
-        try:
-            obj = getattr(importlib.import_module(module_name), attr)
-        except (ImportError, AttributeError) as error:
-            raise ValueError(f"cannot import {entry!r}: {error}") from None
-        obj = obj() if isinstance(obj, type) else obj
-        if not isinstance(obj, TransferMethod):
-            raise ValueError(f"{entry!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+        obj = registry.resolve(entry)
         methods[obj.name] = obj
     if not methods:
         raise ValueError("no methods given")

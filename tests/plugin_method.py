@@ -1,8 +1,11 @@
 """A user's own transfer method, as `tatl run --methods plugin_method:ZeroTorque` loads it."""
 
 import dataclasses
+from typing import ClassVar
 
 import numpy as np
+
+from tatl_mj.validation import Constraints, Interval, check_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,3 +31,25 @@ class Broken:
 
     def learn(self, problem, target_samples):
         raise RuntimeError("deliberately broken plug-in")
+
+
+@dataclasses.dataclass(frozen=True)
+class FixedAction:
+    """Always the action of one index (None: the middle one); declares its settings' constraints
+    as the built-ins do, so a spec's bad ``index`` stops the load in one line."""
+
+    index: int | None = None
+    name: str = "fixed"
+
+    constraints: ClassVar[Constraints] = {"index": [None, Interval(int, 0)]}
+
+    def __post_init__(self):
+        check_settings(self)
+
+    def learn(self, problem, target_samples):
+        target = problem.target
+        index = target.n_actions // 2 if self.index is None else min(self.index, target.n_actions - 1)
+        if target.discrete:
+            return lambda states: np.full(len(states), index)
+        value = target.action_values[index]
+        return lambda states: np.repeat(value[None], len(states), axis=0)

@@ -73,7 +73,7 @@ def test_run_with_a_plugin_method(tmp_path):
     methods = json.loads((out / "summary.json").read_text())["experiments"]["ip_to_flipped_ip"]["methods"]
     assert set(methods) == {"rl", "zero"}
     bad = tatl("run", str(spec), "--preset", "tiny", "--out", str(out), "--methods", "ta-tl,nope:Missing")
-    assert bad.returncode == 2 and "cannot import 'nope:Missing'" in bad.stderr
+    assert bad.returncode == 2 and "--methods: method 'nope:Missing': cannot import module 'nope'" in bad.stderr
     # A discrete target (the grid world): the plug-in's policy returns action indices.
     grid = tatl(
         "run",

@@ -12,9 +12,9 @@ from test_transfer_method import SourceQ  # Q_S(x, a) = a x_0 over actions -1, 0
 
 from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
-from tatl_mj.experiments import pipeline, summary
+from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.transfer import registry
+from tatl_mj.transfer import registry, roles
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
@@ -161,6 +161,18 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
     assert rollout == preset.evaluation_episodes * preset.evaluation_steps  # the pendulum never ends early
     for point in record["curve"]:
         assert point["target_transitions"] == point["samples_used"] + rollout
+        assert point["rollout_transitions"] == rollout  # the paper does not count these
+    # Algorithm 2's k trials as a setting: one episode of U_M charges one episode's steps.
+    one = registry.resolve("ta-tl-k1", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 1})
+    record = pipeline.run_method(spec, preset, 0, "ta-tl-k1", artifacts, transfer=one)
+    assert {p["rollout_transitions"] for p in record["curve"]} == {preset.evaluation_steps}
+    # zeta = "none" in a spec: Algorithm 2 off, every sample used, nothing rolled out.
+    off = registry.resolve("ta-tl-all", {"method": "ta-tl", "zeta": "none"})
+    assert off.zeta is None
+    record = pipeline.run_method(spec, preset, 0, "ta-tl-all", artifacts, transfer=off)
+    assert [p["samples_used"] for p in record["curve"]] == list(preset.target_budgets)
+    assert [p["target_transitions"] for p in record["curve"]] == list(preset.target_budgets)
+    assert {p["rollout_transitions"] for p in record["curve"]} == {0}
     # A method without hooks counts its samples; one drawing its own data counts those.
     rl = pipeline.run_method(spec, preset, 0, "rl", artifacts)
     assert [p["target_transitions"] for p in rl["curve"]] == list(preset.target_budgets)
@@ -180,6 +192,9 @@ def test_algorithm_2_compares_both_utilities_from_its_own_starts(flipped):
     u_true = problem.target_return(policy)
     assert problem.model_return(exact, policy) == pytest.approx(u_true, rel=1e-6)
     assert problem.utility_gap(exact) == pytest.approx(0.0, abs=1e-6 * abs(u_true))
+    # Over fewer episodes too: U_M and U_Mhat then start from the first of those starts.
+    assert problem.utility_gap(exact, episodes=1) == pytest.approx(0.0, abs=1e-6 * abs(u_true))
+    assert problem.target_return(policy, episodes=1) != u_true
     # Those starts are not the evaluation's.
     n = preset.evaluation_episodes
     evaluation = sampling.start_states(
@@ -267,9 +282,9 @@ def test_every_spec_lists_the_fair_baselines_and_ablations(path):
     # A fixed reference return in every preset, so no threshold depends on the methods listed.
     assert all(preset.reference_return is not None for preset in spec.presets.values())
     if spec.target.domain == "gridworld":
-        assert ("ta-tl", "replan-no-source") in summary.ablation_pairs(methods)
+        assert ("ta-tl", "replan-no-source") in verdicts.ablation_pairs(methods)
         return
-    assert ("ta-tl", "apprentice-fqi") in summary.ablation_pairs(methods)
+    assert ("ta-tl", "apprentice-fqi") in verdicts.ablation_pairs(methods)
     # The ablation fits ta-tl's own apprentice, and learns with the RL baseline's settings.
     assert methods["apprentice-fqi"]["apprentice"] == methods["ta-tl"]["apprentice"]
     for key, value in methods["rl"].items():
@@ -283,8 +298,8 @@ def test_new_methods_are_registered_and_source_free_where_they_say():
     for name in ("apprentice-fqi", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior"):
         assert registry.build(name).name == name
     assert registry.build("rl-online").data == "online" and registry.build("uma-tl-reset").data == "reset"
-    assert "apprentice-fqi" in registry.SOURCE_FREE and "uma-tl-prior" not in registry.SOURCE_FREE
-    with pytest.raises(ValueError, match=r"RL.data is 'replay'; valid choices: \['shared', 'reset', 'online'\]"):
+    assert "apprentice-fqi" in roles.SOURCE_FREE and "uma-tl-prior" not in roles.SOURCE_FREE
+    with pytest.raises(ValueError, match=r"RL.data must be one of \['shared', 'reset', 'online'\], got 'replay'"):
         RL(data="replay")
 
 
@@ -323,7 +338,8 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
 
     other = lambda states: np.ones((len(states), 1))  # noqa: E731
     points = [
-        {"samples": b, "samples_used": 10, "target_transitions": b, "learn_s": 0.0, "warnings": []}
+        {"samples": b, "samples_used": 10, "target_transitions": b, "rollout_transitions": 0}
+        | {"learn_s": 0.0, "warnings": []}
         for b in (40, 120, 200)
     ]
     curve = pipeline._evaluated_curve(spec, preset, target, points, [policy, other, policy], eval_seed=3)
@@ -338,7 +354,7 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
 def test_target_learners_take_a_precision_for_the_linear_regressor_only():
     assert RL(precision="single").regressor_spec()["precision"] == "single"
     assert "precision" not in RL().regressor_spec()  # double, the regressor's default
-    with pytest.raises(ValueError, match=r"RL\.precision is 'half'; valid choices: \['double', 'single'\]"):
+    with pytest.raises(ValueError, match=r"RL\.precision must be one of \['double', 'single'\] or None .*, got 'half'"):
         RL(precision="half")
     with pytest.raises(ValueError, match=r"RL\.precision applies to regressor 'linear' only"):
         RL(regressor="extra_trees", precision="single")

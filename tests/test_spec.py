@@ -2,10 +2,12 @@
 
 import copy
 import dataclasses
+import textwrap
 import tomllib
 from pathlib import Path
 
 import pytest
+from conftest import ROOT
 
 from tatl_mj.experiments import spec as spec_mod
 
@@ -285,3 +287,68 @@ def test_the_spec_loader_takes_its_mapping_kinds_from_the_mappings_table():
     from tatl_mj.experiments.mappings import MAPPINGS
 
     assert tuple(MAPPINGS) == ("identity", "manifold_alignment", "transition_alignment", "affine")
+
+
+def _write(path, text):
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_a_spec_extends_its_parent_with_only_what_differs(tmp_path):
+    parent = _write(tmp_path / "parent.toml", (ROOT / "tasks" / "mc_to_ip.toml").read_text())
+    (tmp_path / "variants").mkdir()
+    child = _write(
+        tmp_path / "variants" / "child.toml",
+        """
+        extends = "../parent.toml"
+        unset = ["paper", "mapping.mu", "mapping.n_neighbors", "methods.uma-tl-prior"]
+        name = "child"
+        streams = "mc_to_ip"
+        [mapping]
+        kind = "transition_alignment"
+        [methods.ta-tl]
+        batch = 5000
+        """,
+    )
+    base, variant = spec_mod.load_spec(parent), spec_mod.load_spec(child)
+    assert variant.name == "child" and variant.title == base.title and variant.presets == base.presets
+    assert variant.mapping.kind == "transition_alignment" and variant.paper == {}
+    # A table merges key by key: ta-tl keeps its apprentice and zeta and gains a batch.
+    assert variant.methods["ta-tl"] == {**base.methods["ta-tl"], "batch": 5000}
+    assert "uma-tl-prior" in base.methods and "uma-tl-prior" not in variant.methods
+    assert set(variant.methods) == set(base.methods) - {"uma-tl-prior"}
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('extends = "missing.toml"\n', "missing.toml: no such spec file"),
+        ('extends = "self.toml"\n', "extends itself (a cycle of specs)"),
+        ('unset = ["paper"]\n', "key 'unset' needs 'extends'"),
+        ('extends = "../tasks/mc_to_ip.toml"\nunset = ["mapping.nope"]\n', "names 'mapping.nope', which"),
+        ("extends = 3\n", "key 'extends' must be the path of a parent spec"),
+    ],
+)
+def test_extends_and_unset_fail_in_one_line(tmp_path, text, message):
+    (tmp_path / "tasks").mkdir()
+    (tmp_path / "tasks" / "mc_to_ip.toml").write_text((ROOT / "tasks" / "mc_to_ip.toml").read_text())
+    (tmp_path / "sub").mkdir()
+    path = tmp_path / "sub" / "self.toml"
+    path.write_text(text)
+    with pytest.raises(spec_mod.SpecError) as caught:
+        spec_mod.load_spec(path)
+    assert message in str(caught.value) and "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("variant", ["cartpole_to_bicycle_affine", "mc_to_ip_energy", "mc_to_ip_triplets"])
+def test_the_shipped_variants_differ_from_their_parents_by_what_they_say(variant):
+    child = spec_mod.load_spec(ROOT / "tasks" / "variants" / f"{variant}.toml")
+    parent = spec_mod.load_spec(ROOT / "tasks" / f"{child.streams}.toml")
+    assert child.streams == parent.name and child.paper == {} and parent.paper
+    assert (child.source, child.target, child.source_learning, child.presets) == (
+        parent.source,
+        parent.target,
+        parent.source_learning,
+        parent.presets,
+    )
+    assert child.mapping != parent.mapping

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from tatl_mj.experiments import summary
+from tatl_mj.experiments import summary, verdicts
 
 
 def test_samples_to_threshold_is_where_the_return_stays_above():
@@ -111,19 +111,20 @@ def test_ablation_pairs_follow_built_ins_and_variants():
         "apprentice-upright": {},
         "rl": {},
     }
-    assert summary.ablation_pairs(methods) == [
+    assert verdicts.ablation_pairs(methods) == [
         ("ta-tl-h", "apprentice-upright"),
         ("ta-tl-h-no-cart", "apprentice-upright"),
     ]
-    assert summary.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
+    assert verdicts.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
     # A placebo variant is an ablation itself, judged against its trained method only.
     placebo = {"ta-tl-h-placebo": {"method": "ta-tl-h", "horizon": 20, "source": "placebo"}}
-    assert summary.ablation_pairs({**methods, **placebo}) == summary.ablation_pairs(methods)
+    assert verdicts.ablation_pairs({**methods, **placebo}) == verdicts.ablation_pairs(methods)
 
 
 def _with_counts(exp: dict) -> dict:
     for data in exp["methods"].values():
         data["curve"]["target_transitions"] = [list(data["curve"]["samples"]) for _ in data["seeds"]]
+        data["curve"]["rollout_transitions"] = [[0] * len(data["curve"]["samples"]) for _ in data["seeds"]]
     return exp
 
 
@@ -158,15 +159,11 @@ def test_statistics_give_normalised_iqm_areas_and_interval_verdicts():
     data = exp["methods"]["ta-tl-h"]
     np.testing.assert_allclose(data["normalised"], np.array([good[s] for s in seeds]) / 10.0)
     assert data["iqm"][1]["low"] < data["iqm"][1]["value"] < data["iqm"][1]["high"]
-    verdicts = {(p["method"], p["ablation"]): p["verdict"] for p in exp["ablations"]}
-    assert verdicts == {("ta-tl-h", "apprentice-upright"): "not credited", ("ta-tl", "apprentice-fqi"): "worse"}
-
-
-def test_counted_area_is_a_step_function_of_counted_transitions():
-    # Counted 1000 at the first budget (rollouts): score 0 until then, then 1.
-    area = summary.counted_area(np.array([[1000, 1000]]), np.array([[1.0, 1.0]]), 100, 10000)
-    assert area[0] == pytest.approx(0.5, abs=0.01)
-    assert summary.counted_area(np.array([[100, 10000]]), np.array([[1.0, 1.0]]), 100, 10000)[0] == 1.0
+    judged = {(p["method"], p["other"]): (p["final"]["verdict"], p["efficiency"]["verdict"]) for p in exp["verdicts"]}
+    assert judged == {
+        ("ta-tl-h", "apprentice-upright"): ("not credited", "not credited"),
+        ("ta-tl", "apprentice-fqi"): ("worse", "worse"),
+    }
 
 
 def test_survival_is_kaplan_meier_over_the_compared_seeds_at_the_largest_budget():

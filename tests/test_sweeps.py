@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, TINY
 
-from tatl_mj.experiments import plot, runner
+from tatl_mj.experiments import credit_maps, runner, tables, verdicts
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments import statistics as stats
 
@@ -19,6 +19,7 @@ def _flipped(sweep=None, **target_kwargs):
     table["presets"] = {"tiny": {**TINY, "target_budgets": [60, 120], "evaluation_steps": 40}}
     table["source_learning"]["iterations"] = 5
     table["methods"] = {"ta-tl": table["methods"]["ta-tl"], "projected-source": {}}
+    table.pop("best_baseline", None)  # names methods this test leaves out
     table["target"]["task_kwargs"] = dict(target_kwargs)
     if sweep is not None:
         table["sweep"] = sweep
@@ -68,40 +69,38 @@ def test_a_bad_sweep_is_one_line_naming_the_key(sweep, message):
 
 def test_the_credit_of_a_method_against_itself_sits_at_one_half():
     scores = np.random.default_rng(0).normal(size=10)
-    estimate = stats.improvement_interval([(scores, scores)])
-    assert estimate.value == 0.5 and estimate.low <= 0.5 <= estimate.high
-    assert stats.verdict(estimate) == stats.NOT_CREDITED
-    pair = {
-        "method": "m",
-        "ablation": "m-copy",
-        "probability_of_improvement": estimate.as_dict(),
-        "verdict": "not credited",
-    }
-    cells = [({"gain": g}, {"ablations": [pair], "methods": {}}) for g in (0.5, 1.0)]
-    table = plot.credit_table("toy", cells)
-    assert table.splitlines()[2] == "| gain | `m` > `m-copy` |"
-    assert table.splitlines()[4].startswith("| 0.5 | 0.50 [") and table.splitlines()[4].endswith("not credited |")
+    answer = verdicts.answer(scores, scores.copy()).as_dict()
+    assert answer["probability"]["value"] == 0.5 and answer["probability"]["low"] < 0.5 < answer["probability"]["high"]
+    assert answer["verdict"] == stats.NOT_CREDITED
+    pair = {"method": "m", "other": "m-copy", "role": "ablation", "final": answer, "efficiency": answer}
+    cells = [({"gain": g}, {"verdicts": [pair], "methods": {}}) for g in (0.5, 1.0)]
+    table = tables.credit_table("toy", cells)
+    assert table.splitlines()[2] == "| gain | `m` > `m-copy`: final; efficiency |"
+    assert table.splitlines()[4] == (
+        "| 0.5 | 0.50 [0.19, 0.81] (0/10/0) not credited; 0.50 [0.19, 0.81] (0/10/0) not credited |"
+    )
 
 
 @pytest.mark.parametrize("two", [False, True], ids=["one-parameter", "two-parameters"])
 def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, drawn, two):
 
     def exp(p):
-        pair = {"value": p, "low": p - 0.1, "high": p + 0.1}
+        answer = {"probability": {"value": p, "low": p - 0.1, "high": p + 0.1}, "verdict": "not credited"}
+        final = {**answer, "probability": {"value": 0.5, "low": 0.2, "high": 0.8}}
         return {
-            "ablations": [{"method": "m", "ablation": "a", "probability_of_improvement": pair, "verdict": "x"}],
+            "verdicts": [{"method": "m", "other": "a", "role": "ablation", "efficiency": answer, "final": final}],
             "methods": {"m": {"final_iqm": {"value": 0.5, "low": 0.4, "high": 0.6}}},
         }
 
     conditions = [{"g": 1, "s": 2}, {"g": 1, "s": 3}] if two else [{"g": 1}, {"g": 2}]
-    plot.credit_map("toy", [(c, exp(p)) for c, p in zip(conditions, (0.3, 0.8))], tmp_path / "c.png")
+    credit_maps.credit_map("toy", [(c, exp(p)) for c, p in zip(conditions, (0.3, 0.8))], tmp_path / "c.png")
     (fig,) = drawn
     left = fig.axes[0]
     if two:  # a heat map: each cell says its value and interval
         assert sorted(t.get_text() for t in left.texts) == ["0.30\n[0.20, 0.40]", "0.80\n[0.70, 0.90]"]
-    else:  # curves with error bars at each swept value
-        (line,) = [ln for ln in left.get_lines() if len(ln.get_xdata()) == 2 and ln.get_linestyle() == "-"]
-        assert list(line.get_ydata()) == [0.3, 0.8]
+    else:  # curves with error bars at each swept value, one per question
+        lines = [ln for ln in left.get_lines() if len(ln.get_xdata()) == 2 and ln.get_linestyle() == "-"]
+        assert sorted(list(ln.get_ydata()) for ln in lines) == [[0.3, 0.8], [0.5, 0.5]]
     assert (tmp_path / "c.png").exists()
 
 
@@ -110,10 +109,10 @@ def test_credit_map_clips_a_baselines_blow_up_and_marks_it(tmp_path, drawn):
         return {"final_iqm": {"value": v, "low": v - 0.05, "high": v + 0.05}}
 
     cells = [
-        ({"g": g}, {"ablations": [], "methods": {"m": final(0.8), "base": final(b)}})
+        ({"g": g}, {"verdicts": [], "methods": {"m": final(0.8), "base": final(b)}})
         for g, b in ((1, 0.9), (2, 0.7), (3, -15.0))
     ]
-    plot.credit_map("toy", cells, tmp_path / "c.png")
+    credit_maps.credit_map("toy", cells, tmp_path / "c.png")
     (fig,) = drawn
     right = fig.axes[1]
     low, high = right.get_ylim()

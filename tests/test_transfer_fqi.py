@@ -1,4 +1,4 @@
-"""Known answers for Fitted Q-Iteration and exact Q-iteration (tatl_mj.transfer.fqi)."""
+"""Known answers for Fitted Q-Iteration (tatl_mj.transfer.fqi)."""
 
 import dataclasses
 
@@ -11,12 +11,11 @@ from tatl_mj.transfer.fqi import (
     ExtraTrees,
     LinearQ,
     LinearRegressor,
-    TabularQ,
     _gathered_columns,
     fitted_q_iteration,
     make_regressor,
-    q_iteration,
 )
+from tatl_mj.transfer.tabular_q import q_iteration
 from tatl_mj.transitions import Transitions
 
 
@@ -24,25 +23,6 @@ def _transitions(s, a, r, s_next, absorbing=None):
     n = len(s)
     absorbing = np.zeros(n, dtype=bool) if absorbing is None else absorbing
     return Transitions(s, a, r, s_next, absorbing, absorbing.copy())
-
-
-def test_q_iteration_on_a_chain_matches_the_closed_form():
-    """Chain of 6 cells, goal at the right end (absorbing), reward -1 a step, actions left/right.
-
-    From a cell k steps from the goal the optimal return is -(1 - gamma^k) / (1 - gamma).
-    """
-    n, gamma = 6, 0.9
-    states = np.arange(n)
-    next_state = np.stack([np.maximum(states - 1, 0), np.minimum(states + 1, n - 1)], axis=1)
-    reward = -np.ones((n, 2))
-    absorbing = next_state == n - 1
-    cells = np.stack([np.zeros(n), states], axis=1)
-    q = q_iteration(next_state, reward, absorbing, gamma, cells=cells)
-    steps = (n - 1) - states[:-1]
-    np.testing.assert_allclose(q.values(states[:-1])[:, 1], -(1 - gamma**steps) / (1 - gamma), atol=1e-9)
-    np.testing.assert_array_equal(q.greedy(cells[:-1]), 1)  # always move right, also via [row, col]
-    with pytest.raises(ValueError, match="cells of the grid"):
-        TabularQ(q.q[:5], cells[:5]).values(np.array([[0.0, 5.0]]))
 
 
 def test_fqi_converges_to_value_iteration_on_a_small_discrete_mdp():
@@ -156,8 +136,6 @@ def test_degenerate_input_raises_clear_errors():
         make_regressor({"kind": "mlp"}, 2)
     with pytest.raises(ValueError, match="min_samples_leaf"):
         ExtraTrees(min_samples_leaf=0)
-    with pytest.raises(ValueError, match="state indices"):
-        q_iteration(np.array([[5]]), np.zeros((1, 1)), np.zeros((1, 1), bool), 0.9)
 
 
 def test_make_regressor_from_spec():
@@ -318,17 +296,6 @@ def test_one_hot_q_values_are_the_indicator_product_exactly():
         q.values(np.array([[3.0, 0.0]]))
 
 
-def test_tabular_q_indexes_one_cell_as_it_indexes_many_and_refuses_non_cells():
-    cells = np.array([[r, c] for r in range(3) for c in range(4) if (r, c) != (1, 2)])  # a wall at (1, 2)
-    q = TabularQ(np.arange(len(cells) * 2.0).reshape(-1, 2), cells=cells)
-    many = q.index(cells.astype(float))
-    assert [int(q.index(cell[None].astype(float))[0]) for cell in cells] == many.tolist() == list(range(len(cells)))
-    assert q.index(np.array([[2.0 + 1e-12, 3.0]])).tolist() == [len(cells) - 1]
-    for bad in ([[1.0, 2.0]], [[0.5, 0.0]], [[3.0, 0.0]], [[-1.0, 0.0]]):
-        with pytest.raises(ValueError, match="cells of the grid"):
-            q.index(np.array(bad))
-
-
 BASES = [
     {"kind": "rbf", "centers": 16, "low": [-1.0, -2.0], "high": [1.0, 2.0], "sigma": [0.5, 1.0]},
     {
@@ -391,7 +358,7 @@ def test_single_precision_passes_stay_within_float32_rounding_of_double():
 
 def test_precision_is_checked_where_it_is_set():
     basis = LinearFeatures()
-    message = r"LinearRegressor\.precision is 'half'; valid choices: \['double', 'single'\]"
+    message = r"LinearRegressor\.precision must be one of \['double', 'single'\], got 'half'"
     with pytest.raises(ValueError, match=message):
         LinearRegressor(basis, 1.0, "half")
     spec = {"kind": "linear", "features": {"kind": "linear"}, "precision": "single"}

@@ -252,7 +252,7 @@ def test_zero_reference_regulates_an_unstable_system():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(reference="upright"), r"HorizonTATLPolicy.reference is 'upright'; valid choices: \['source', 'zero'\]"),
+        (dict(reference="upright"), r"HorizonTATLPolicy.reference must be one of \['source', 'zero'\], got 'upright'"),
         (dict(horizon=0), "HorizonTATLPolicy.horizon must be an integer >= 1"),
         (dict(horizon=2.5), "HorizonTATLPolicy.horizon must be an integer >= 1"),
         (dict(step_ratio=-2.0), "HorizonTATLPolicy.step_ratio must be a finite number > 0"),

@@ -15,8 +15,8 @@ from tatl_mj.description import CellMap
 from tatl_mj.suite import gridworld
 from tatl_mj.transfer import tabular
 from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping
-from tatl_mj.transfer.fqi import q_iteration
 from tatl_mj.transfer.methods.replan import OneStepRule, replan
+from tatl_mj.transfer.tabular_q import q_iteration
 from tatl_mj.transitions import Transitions
 
 GAMMA = 0.95

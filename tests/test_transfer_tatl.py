@@ -12,7 +12,7 @@ import pytest
 from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping
 from tatl_mj.transfer.apprentice import fit_apprentice
 from tatl_mj.transfer.features import LinearFeatures, OneHot, wrap_angle
-from tatl_mj.transfer.fqi import q_iteration
+from tatl_mj.transfer.tabular_q import q_iteration
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
 
 DT = 0.1

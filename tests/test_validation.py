@@ -111,4 +111,4 @@ def test_choice():
     assert validation.choice("Owner", "kind", "b", ("a", "b")) == "b"
     with pytest.raises(ValueError) as error:
         validation.choice("Owner", "kind", "c", ("a", "b"))
-    assert str(error.value) == "Owner.kind is 'c'; valid choices: ['a', 'b']"
+    assert str(error.value) == "Owner.kind must be one of ['a', 'b'], got 'c'"

@@ -36,7 +36,7 @@ from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import mappings
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import apprentice, fqi, method
+from tatl_mj.transfer import apprentice, fqi, method, tabular_q
 from tatl_mj.transfer.methods import horizon
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions
@@ -222,7 +222,7 @@ def _source_q(spec: ExperimentSpec, preset: Preset, seed: int) -> tuple[Any, int
     if learner.method == "q_iteration":  # exact, on the task's known model (checked at spec load)
         assert source.known_model is not None
         next_state, reward, absorbing, cells = source.known_model()
-        return fqi.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
+        return tabular_q.q_iteration(next_state, reward, absorbing, learner.gamma, cells=cells), 0
     n_actions = source.n_actions
     data = random_transitions(spec.source, preset.source_samples, derive_seed(seed, spec.stream_name, "source-data"))
     regressor = fqi.make_regressor(
@@ -448,29 +448,40 @@ def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
 def _model_returns(
     spec: ExperimentSpec, preset: Preset, seed: int, reward: Callable | None
 ) -> tuple[Callable, Callable] | tuple[None, None]:
-    """U_Mhat(pi) as hooks: ``apprentice.model_return`` and ``model_returns`` (several
-    models at once), or None where the task has no reward.
+    """U_Mhat(pi) as hooks: ``model_return(model, policy, episodes=None)`` and
+    ``model_returns(models, policy, episodes=None)`` (several models at once), or None
+    where the task has no reward.
 
     The target task's own reward and end conditions (``_target_reward``) score the
     model's predicted states, from the start states of the real rollouts of U_M
-    (``_algorithm2_seed``), for the evaluation protocol's steps. A task with no
-    such reward gets None: Algorithm 2 then cannot run there.
+    (``_algorithm2_seed``; ``episodes`` of them, default the evaluation protocol's),
+    for the evaluation protocol's steps. A task with no such reward gets None:
+    Algorithm 2 then cannot run there.
     """
     if reward is None:
         return None, None
     target = spec.target
     description = description_of(target)
-    starts = sampling.start_states(
-        target.domain, target.task, preset.evaluation_episodes, _algorithm2_seed(spec, seed), target.task_kwargs
-    )
+
+    @cache
+    def starts(episodes: int) -> np.ndarray:
+        return sampling.start_states(
+            target.domain, target.task, episodes, _algorithm2_seed(spec, seed), target.task_kwargs
+        )
+
     settings = dict(
-        starts=starts,
         reward=reward,
         action_values=description.action_values,
         steps=preset.evaluation_steps,
         snap=apprentice.state_snap(description),
     )
-    return partial(apprentice.model_return, **settings), partial(apprentice.model_returns, **settings)
+
+    def model_returns(models: list, policy: Callable, episodes: int | None = None) -> list[float]:
+        return apprentice.model_returns(
+            models, policy, starts=starts(episodes or preset.evaluation_episodes), **settings
+        )
+
+    return (lambda model, policy, episodes=None: model_returns([model], policy, episodes)[0]), model_returns
 
 
 class Ledger:
@@ -483,11 +494,12 @@ class Ledger:
 
     def __init__(self) -> None:
         self.count = 0
-        self._rollouts: dict[int, tuple[Callable, float, int]] = {}
-        self._charged: set[int] = set()
+        self.rollouts = 0  # of ``count``, the transitions of policy rollouts (Algorithm 2's U_M)
+        self._rollouts: dict[tuple[int, int | None], tuple[Callable, float, int]] = {}
+        self._charged: set[tuple[int, int | None]] = set()
 
     def new_budget(self) -> None:
-        self.count, self._charged = 0, set()
+        self.count, self.rollouts, self._charged = 0, 0, set()
 
     def data(self, transitions: Transitions) -> Transitions:
         self.count += len(transitions)
@@ -497,14 +509,18 @@ class Ledger:
         """Counts n transitions a method replays from an earlier budget's collection."""
         self.count += int(n)
 
-    def rollout(self, policy: Callable, run: Callable[[Callable], tuple[np.ndarray, np.ndarray]]) -> float:
-        entry = self._rollouts.get(id(policy))
+    def rollout(
+        self, policy: Callable, run: Callable[[Callable], tuple[np.ndarray, np.ndarray]], episodes: int | None = None
+    ) -> float:
+        key = (id(policy), episodes)
+        entry = self._rollouts.get(key)
         if entry is None or entry[0] is not policy:
             returns, lengths = run(policy)
-            entry = self._rollouts[id(policy)] = (policy, float(np.mean(returns)), int(np.sum(lengths)))
-        if id(policy) not in self._charged:
-            self._charged.add(id(policy))
+            entry = self._rollouts[key] = (policy, float(np.mean(returns)), int(np.sum(lengths)))
+        if key not in self._charged:
+            self._charged.add(key)
             self.count += entry[2]
+            self.rollouts += entry[2]
         return entry[1]
 
 
@@ -569,8 +585,9 @@ def transfer_problem(
     source, target = description_of(spec.source), description_of(spec.target)
     rollout_seed = _algorithm2_seed(spec, seed)
 
-    def target_return(policy: Callable) -> float:
-        return ledger.rollout(policy, lambda p: target_returns(spec, preset, p, rollout_seed))
+    def target_return(policy: Callable, episodes: int | None = None) -> float:
+        protocol = preset if episodes is None else dataclasses.replace(preset, evaluation_episodes=episodes)
+        return ledger.rollout(policy, lambda p: target_returns(spec, protocol, p, rollout_seed), episodes)
 
     reward = _target_reward(spec.target)  # loads the task once: every hook below shares it
     policy_samples = _nested_samples(partial(_policy_samples, spec, seed), max(preset.target_budgets))
@@ -691,6 +708,8 @@ def _learn_point(
         "samples_used": used,
         # Every real-target transition it learned from (stream, rollouts, own data).
         "target_transitions": stream + ledger.count if hooks.uses_samples else 0,
+        # Of those, the policy rollouts' (Algorithm 2's U_M): the paper does not count them.
+        "rollout_transitions": ledger.rollouts if hooks.uses_samples else 0,
         "learn_s": learn_s,
         # e.g. Algorithm 2's stopping rule not met within the budget
         "warnings": sorted({str(w.message) for w in caught}),
@@ -724,7 +743,7 @@ def _evaluated_curve(
         share = evaluate_s * int(lengths.sum()) / max(steps, 1) if id(policy) not in timed else 0.0
         timed.add(id(policy))
         steady = {} if calls is None else {"steadiness": steadiness(target, *calls)}
-        learned = {k: point[k] for k in ("samples", "samples_used", "target_transitions")}
+        learned = {k: point[k] for k in ("samples", "samples_used", "target_transitions", "rollout_transitions")}
         curve.append(
             {
                 **learned,

@@ -40,8 +40,8 @@ from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
 from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, write_atomic, write_json
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
-from tatl_mj.transfer import fqi, registry
-from tatl_mj.transfer.method import TransferMethod, contract
+from tatl_mj.transfer import fit_time, registry
+from tatl_mj.transfer.method import contract
 
 EXECUTORS = ("local", "ray")
 
@@ -110,7 +110,7 @@ def _work(
 ) -> dict:
     """:func:`work`'s unit, which may raise."""
     preset = spec.preset(preset_name)
-    substeps, fits = sampling.physics_substeps(), fqi.fqi_seconds()
+    substeps, fits = sampling.physics_substeps(), fit_time.fqi_seconds()
     if unit.name == SOURCE_UNIT:
         # source_blob here: the artefacts of an experiment that differs only in its mapping.
         shared = pickle.loads(source_blob) if source_blob is not None else None
@@ -132,7 +132,7 @@ def _work(
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
     record["kernels"] = pipeline.kernels()  # what it depends on besides its settings and seed
     record["wall_s"] = time.perf_counter() - start
-    record["fqi_s"] = fqi.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
+    record["fqi_s"] = fit_time.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
     # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
     record["physics_substeps"] = {
         key: n - substeps.get(key, 0) for key, n in sampling.physics_substeps().items() if n > substeps.get(key, 0)
@@ -312,10 +312,8 @@ def _plan(
     the spec's settings where it has them); a dict: name -> method object (None
     for such a built-in).
     """
-    custom = {k: v for k, v in methods.items() if v is not None} if isinstance(methods, dict) else {}
-    for name, obj in custom.items():
-        if not isinstance(obj, TransferMethod):
-            raise ValueError(f"method {name!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+    given = methods.items() if isinstance(methods, dict) else []
+    custom = {k: registry.resolve(v, label=k) for k, v in given if v is not None}
     units = []
     for spec in specs:
         names = list(spec.methods) if methods is None else list(methods)
@@ -334,7 +332,7 @@ def _plan(
 
 # What a method unit's record may depend on besides its method and seed: everything in
 # its spec but the experiment's names, its mapping and its other methods.
-_NOT_SHARED = ("name", "title", "paper_claim", "path", "mapping", "methods", "streams")
+_NOT_SHARED = ("name", "title", "paper_claim", "paper", "best_baseline", "path", "mapping", "methods", "streams")
 
 
 def _experiment_key(spec: ExperimentSpec, preset: str) -> list:

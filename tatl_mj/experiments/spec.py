@@ -2,7 +2,7 @@
 
 A spec names the source and target tasks, how the source policy is learned,
 the inter-task mapping, the transfer methods to compare with their settings
-(``[methods.NAME]`` tables, built by ``tatl_mj.transfer.registry``), and named
+(``[methods.NAME]`` tables, built by ``tatl_mj.transfer.registry.resolve``), and named
 presets of sample budgets and evaluation protocol. Validation calls the same
 factories the workers use (``suite.describe``, ``make_regressor``, the method
 constructors), so any unknown key (feature tables included), wrong type,
@@ -12,7 +12,7 @@ naming the file, the key path and what was expected. See ``tasks/*.toml``.
 A user's own code is named by import path, ``"module:attribute"``, and imported
 wherever the spec is used (here and in every worker): a side's ``domain``
 (``tatl_mj.suite.domain``), and a ``[methods.NAME]`` table's ``method`` key, a
-class built with the table's other settings (:func:`build_method`).
+class built with the table's other settings (``tatl_mj.transfer.registry.resolve``).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ import typing
 from pathlib import Path
 from typing import Any
 
+from tatl_mj.transfer import registry, roles
+from tatl_mj.transfer.method import contract
 from tatl_mj.validation import is_integer, is_number
 
 SAMPLING_KINDS = ("episodes", "uniform")
@@ -156,6 +158,14 @@ class ExperimentSpec:
     # same source data, target samples and evaluation starts (a paired comparison), and
     # their methods without a source are computed once (``tatl_mj.experiments.runner``).
     streams: str = ""
+    # The strongest baseline per verdict question ({"final": NAME, "efficiency": NAME}),
+    # chosen on the tuning seeds and frozen here (``verdicts.choose_best_baseline``): every
+    # method that is not a baseline is compared with it, whichever seeds are reported.
+    best_baseline: dict = dataclasses.field(default_factory=dict)
+    # What the paper reports for this experiment, for the paper-vs-here table
+    # (``tables.paper_table``): ``section`` (where in the paper) and ``numbers`` (its
+    # figures, as text). Empty for the variants and sweeps, which the paper does not have.
+    paper: dict = dataclasses.field(default_factory=dict)
 
     def preset(self, name: str) -> Preset:
         if name not in self.presets:
@@ -363,22 +373,34 @@ def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
 
 
 def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
-    from tatl_mj.transfer import registry
-
     p = spec.path
     if not spec.methods:
         raise SpecError(f"{p}: at least one [methods.NAME] table is required; valid names: {sorted(registry.METHODS)}")
     for name, settings in spec.methods.items():
         if not isinstance(settings, dict):
             _fail(p, f"methods.{name}", "a table of settings", settings)
+        for key in roles.PAIR_KEYS:
+            other = settings.get(key)
+            if key in settings and (not isinstance(other, str) or other not in spec.methods or other == name):
+                _fail(
+                    p, f"methods.{name}.{key}", f"the name of another method of this spec {sorted(spec.methods)}", other
+                )
         try:
-            from tatl_mj.transfer.method import contract
-
-            check = contract(build_method(name, settings)).check
+            check = contract(registry.resolve(name, settings)).check
             if check is not None:
                 check(source, target)
         except (TypeError, ValueError) as error:
             raise SpecError(f"{p}: key 'methods.{name}': {error}") from None
+    for key, value in spec.paper.items():
+        if key not in ("section", "numbers"):
+            raise SpecError(f"{p}: unknown key 'paper.{key}'; valid keys: ['numbers', 'section']")
+        if not isinstance(value, str):
+            _fail(p, f"paper.{key}", "a string", value)
+    for question, baseline in spec.best_baseline.items():
+        if question not in ("final", "efficiency"):
+            raise SpecError(f"{p}: unknown key 'best_baseline.{question}'; valid keys: ['efficiency', 'final']")
+        if baseline not in spec.methods:
+            _fail(p, f"best_baseline.{question}", f"a method of this spec {sorted(spec.methods)}", baseline)
 
 
 def _check_sweep(spec: ExperimentSpec) -> None:
@@ -449,78 +471,18 @@ def methods_from_spec(spec: ExperimentSpec, preset: Preset, names: list[str] | N
     it unset, is the preset's smallest target budget; a model-based learner's
     ``model_samples``, likewise, is the preset's where it sets one.
     """
-    from tatl_mj.transfer import registry
-
     chosen = list(spec.methods) if names is None else names
     out = {}
     for name in chosen:
         settings = dict(spec.methods.get(name, {}))
-        if plugin_path(settings) is None:
-            known = registry.settings_of(registry.base_of(name, settings))
+        if roles.plugin_path(settings) is None:
+            known = registry.settings_of(roles.base_of(name, settings))
             if "batch" in known and settings.get("batch") is None:
                 settings["batch"] = min(preset.target_budgets)
             if "model_samples" in known and "model_samples" not in settings and preset.model_samples is not None:
                 settings["model_samples"] = preset.model_samples
-        out[name] = build_method(name, settings)
+        out[name] = registry.resolve(name, settings)
     return out
-
-
-def plugin_path(settings: dict[str, Any]) -> str | None:
-    """The ``module:attribute`` a ``[methods.NAME]`` table's ``method`` key names, or None
-    (a built-in or a variant of one)."""
-    from tatl_mj.transfer import registry
-
-    base = settings.get(registry.VARIANT_KEY)
-    return base if isinstance(base, str) and ":" in base else None
-
-
-def _tuples(value: Any) -> Any:
-    """TOML arrays as tuples (method settings are frozen), tables left as dicts."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
-
-
-def build_method(name: str, settings: dict[str, Any] | None = None) -> Any:
-    """The method a ``[methods.NAME]`` table builds; ValueError (one line) if it cannot.
-
-    ``method = "module:attribute"`` names a user's own method: a class is called with
-    the table's other settings as keyword arguments (and ``name=NAME`` where its
-    constructor takes a ``name``); an instance takes no settings. It is imported in
-    the process that builds it, so each worker imports it too. Anything else is a
-    built-in or a variant of one (``tatl_mj.transfer.registry.build``).
-    """
-    import inspect
-
-    from tatl_mj import plugins
-    from tatl_mj.transfer import registry
-    from tatl_mj.transfer.method import TransferMethod
-
-    settings = dict(settings or {})
-    path = plugin_path(settings)
-    if path is None:
-        return registry.build(name, settings)
-    if name in registry.METHODS:
-        raise ValueError(f"method {name!r} is a built-in; your own method {path!r} needs a table name of its own")
-    obj = plugins.load(path, "method")
-    kwargs = {k: _tuples(v) for k, v in settings.items() if k != registry.VARIANT_KEY}
-    if isinstance(obj, type):
-        try:
-            parameters = inspect.signature(obj).parameters
-        except (TypeError, ValueError):
-            parameters = {}
-        takes_any = any(p.kind is p.VAR_KEYWORD for p in parameters.values())
-        if "name" in kwargs:
-            raise ValueError(f"method {path!r}: 'name' is the table's name ({name!r}), not a setting")
-        if "name" in parameters or takes_any:
-            kwargs["name"] = name
-        try:
-            obj = obj(**kwargs)
-        except TypeError as error:
-            raise ValueError(f"method {path!r}: {path.partition(':')[2]}(**settings) failed: {error}") from None
-    elif kwargs:
-        raise ValueError(f"method {path!r} is an instance, not a class: it takes no settings, got {sorted(kwargs)}")
-    if not isinstance(obj, TransferMethod):
-        raise ValueError(f"method {path!r} is not a TransferMethod (needs a name and learn(problem, samples))")
-    return obj
 
 
 def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:
@@ -538,11 +500,23 @@ def parse_spec(table: dict, path: str = "<spec>") -> ExperimentSpec:
     return skeleton
 
 
+EXTENDS, UNSET = "extends", "unset"
+"""A spec's loader keys: ``extends = "PARENT.toml"`` (a path relative to the spec) starts
+from the parent's settings, the spec's own tables merged over them key by key; ``unset =
+["mapping.mu", "methods.NAME"]`` then removes what the parent set and the spec does not
+want. Settings only: ``streams`` (not ``extends``) makes two experiments share their random
+draws and the records of their methods without a source."""
+
+
 def load_spec(path: str | Path) -> ExperimentSpec:
-    """Reads and validates one experiment spec (TOML)."""
+    """Reads and validates one experiment spec (TOML), resolving ``extends`` and ``unset``."""
     path = Path(path)
+    return parse_spec(_resolved_table(path, ()), str(path))
+
+
+def _read_table(path: Path) -> dict:
     try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError(f"{path}: no such spec file") from None
     except IsADirectoryError:  # [robustness]
@@ -553,7 +527,42 @@ def load_spec(path: str | Path) -> ExperimentSpec:
         raise SpecError(f"{path}: cannot read: {error.strerror or error}") from None
     except tomllib.TOMLDecodeError as error:
         raise SpecError(f"{path}: not valid TOML: {error}") from None
-    return parse_spec(table, str(path))
+
+
+def _resolved_table(path: Path, children: tuple[Path, ...]) -> dict:
+    """The spec's table with its parents' settings merged in (``EXTENDS``), as if written out flat."""
+    table = _read_table(path)
+    parent, unset = table.pop(EXTENDS, None), table.pop(UNSET, [])
+    if parent is None:
+        if unset:
+            raise SpecError(f"{path}: key '{UNSET}' needs '{EXTENDS}' (there is no parent to unset keys of)")
+        return table
+    if not isinstance(parent, str) or not parent:
+        _fail(str(path), EXTENDS, "the path of a parent spec, relative to this one", parent)
+    if not isinstance(unset, list) or not all(isinstance(k, str) and k for k in unset):
+        _fail(str(path), UNSET, "an array of dotted keys of the parent (e.g. 'mapping.mu')", unset)
+    parent_path = (path.parent / parent).resolve()
+    if parent_path in (*children, path.resolve()):
+        raise SpecError(f"{path}: key '{EXTENDS}' = {parent!r} extends itself (a cycle of specs)")
+    merged = _merged(_resolved_table(parent_path, (*children, path.resolve())), table)
+    for dotted in unset:
+        *outer, last = dotted.split(".")
+        holder = merged
+        for key in outer:
+            holder = holder.get(key) if isinstance(holder, dict) else None
+        if not isinstance(holder, dict) or last not in holder:
+            raise SpecError(f"{path}: key '{UNSET}' names {dotted!r}, which {parent} does not set")
+        del holder[last]
+    return merged
+
+
+def _merged(parent: dict, child: dict) -> dict:
+    """``child`` over ``parent``: tables merge key by key, anything else is replaced."""
+    out = dict(parent)
+    for key, value in child.items():
+        both = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merged(out[key], value) if both else value
+    return out
 
 
 def spec_to_dict(spec: ExperimentSpec) -> dict:

@@ -14,10 +14,10 @@ Definitions (one place; the table, the figures and summary.json all use them):
   methods listed, so the table says so).
 - Interval estimates (``tatl_mj.experiments.statistics``), with a reference:
   per method and budget the IQM of the normalised score with its 95%
-  stratified-bootstrap interval; the area under the normalised learning curve
-  over log counted target transitions (``auc``); and the probability of
-  improvement over the method's source-free ablation and over the best baseline,
-  on that area, with the verdict its interval gives.
+  stratified-bootstrap interval; the efficiency area under the normalised
+  learning curve over log counted target transitions (``efficiency``), and on
+  the paper's accounting (``efficiency_paper``); and the verdicts of the pairs
+  the spec declares, two questions each (``tatl_mj.experiments.verdicts``).
 - No meaningful threshold: a threshold at or below ``R_random`` (no method beat
   the random policy on average) says nothing about learning speed; samples to
   threshold are then not reported and the experiment is judged on final returns.
@@ -26,7 +26,9 @@ Definitions (one place; the table, the figures and summary.json all use them):
   the smallest budget from which its return stays at or above the threshold at
   every larger budget (a method that crosses and falls back has not reached it);
   ``math.inf`` if it never does (``null`` in summary.json, which has no infinity).
-  Records from before transitions were counted fall back to the budget.
+  Records from before transitions were counted fall back to the budget. The same
+  on the paper's accounting (its apprentice samples, Algorithm 2's rollouts not
+  counted) is ``samples_to_threshold_paper``.
 
 :func:`compare` applies them to one experiment of a summary; the results table
 and panel (b) of the figures are both drawn from its answer.
@@ -42,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from tatl_mj.experiments import statistics as stats
+from tatl_mj.experiments import verdicts
 from tatl_mj.experiments.records import RunDirectory, read_json
 
 THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
@@ -97,6 +100,8 @@ class MethodResult:
     samples_to_threshold: tuple[float, ...]  # math.inf: never; empty when no meaningful threshold
     extra_seeds: tuple[int, ...]  # finished but not shared by every method: not compared
     largest_budget: int
+    # The same on the paper's accounting (its samples, Algorithm 2's rollouts not counted).
+    samples_to_threshold_paper: tuple[float, ...] = ()
 
     @property
     def final_mean(self) -> float:
@@ -110,6 +115,12 @@ class MethodResult:
     def median_samples(self) -> float:
         """Median over seeds, a seed that never reached the threshold counting as infinite."""
         return float(np.median(self.samples_to_threshold)) if self.samples_to_threshold else math.nan
+
+    @property
+    def median_samples_paper(self) -> float:
+        """:attr:`median_samples` on the paper's accounting."""
+        paper = self.samples_to_threshold_paper
+        return float(np.median(paper)) if paper else math.nan
 
 
 @dataclass(frozen=True)
@@ -174,11 +185,16 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
         curve = data[m]["curve"]
         budgets = list(curve["samples"])
         counts = curve.get("target_transitions")
+        paper = _paper(curve) if counts and "rollout_transitions" in curve else counts
         reached: tuple[float, ...] = ()
+        reached_paper: tuple[float, ...] = ()
         if meaningful:
-            reached = tuple(
-                samples_to_threshold(budgets, curve["mean_return"][i], threshold, counts[i] if counts else None)
-                for i in rows
+            reached, reached_paper = (
+                tuple(
+                    samples_to_threshold(budgets, curve["mean_return"][i], threshold, way[i] if way else None)
+                    for i in rows
+                )
+                for way in (counts, paper)
             )
         out.append(
             MethodResult(
@@ -188,6 +204,7 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
                 samples_to_threshold=reached,
                 extra_seeds=tuple(s for s in data[m]["seeds"] if s not in shared),
                 largest_budget=int(max(budgets)),
+                samples_to_threshold_paper=reached_paper,
             )
         )
     return Comparison(
@@ -199,54 +216,6 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
         best_method=best,
         meaningful=meaningful,
     )
-
-
-def ablation_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
-    """(transfer method, its source-free ablation) for every such pair a spec lists.
-
-    Pairs go by built-in (``registry.ABLATION_OF``), so a variant (a table with
-    ``method = "ta-tl"``) is paired with the ablation of its built-in; of the
-    ablations a built-in names, the first the spec lists is its pair.
-    """
-    from tatl_mj.transfer import registry
-
-    def base(name: str) -> str | None:
-        try:
-            return registry.base_of(name, spec_methods.get(name) or {})
-        except ValueError:
-            return None
-
-    bases = {name: base(name) for name in spec_methods}
-    pairs = []
-    for name, b in bases.items():
-        if (spec_methods.get(name) or {}).get("source") == "placebo":
-            continue  # a placebo is itself an ablation, judged against its trained method
-        for wanted in registry.ABLATION_OF.get(b or "", ()):
-            found = [other for other, ob in bases.items() if ob == wanted]
-            if found:
-                pairs.extend((name, other) for other in found)
-                break
-    return pairs
-
-
-def placebo_pairs(spec_methods: dict[str, Any]) -> list[tuple[str, str]]:
-    """(transfer method, the same method on a placebo source) for every such pair a spec lists:
-    a table with ``source = "placebo"`` pairs with the table of the same built-in whose
-    settings are otherwise the same."""
-    from tatl_mj.transfer import registry
-
-    def key(name: str) -> tuple[str, list] | None:
-        settings = dict(spec_methods.get(name) or {})
-        try:
-            base = registry.base_of(name, settings)
-        except ValueError:
-            return None
-        rest = sorted((k, repr(v)) for k, v in settings.items() if k not in (registry.VARIANT_KEY, "source"))
-        return base, rest
-
-    placebos = [n for n, s in spec_methods.items() if (s or {}).get("source") == "placebo"]
-    trained = [n for n, s in spec_methods.items() if (s or {}).get("source", "trained") == "trained"]
-    return [(t, p) for p in placebos for t in trained if key(t) is not None and key(t) == key(p)]
 
 
 def _side(mine: np.ndarray, theirs: np.ndarray, mine_centre: float, theirs_centre: float) -> tuple[int, int, int]:
@@ -294,6 +263,13 @@ def ablation_verdict(comparison: Comparison, method: str, ablation: str) -> str 
     return f"`{method}` vs `{ablation}`: {'; '.join(parts)}: `{method}` {verdict}."
 
 
+def ablation_sentences(experiment: dict, comparison: Comparison) -> list[str]:
+    """:func:`ablation_verdict` for every ablation pair the experiment's spec declares (the
+    judgement where there is no reference return to normalise by)."""
+    pairs = verdicts.ablation_pairs((experiment.get("spec") or {}).get("methods") or {})
+    return [v for v in (ablation_verdict(comparison, m, a) for m, a in pairs) if v]
+
+
 def _samples_text(value: float) -> str:
     return "never" if not math.isfinite(value) else f"{value:,.0f}"
 
@@ -336,12 +312,13 @@ def _experiment(
     for result in comparison.methods:
         # Per finished seed (not only the shared ones), against the shared-seed threshold.
         curve = out_methods[result.method]["curve"]
-        out_methods[result.method]["samples_to_threshold"] = [
-            _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold, counts))
-            if comparison.meaningful
-            else None
-            for returns, counts in zip(curve["mean_return"], curve["target_transitions"])
-        ]
+        for key, accounting in (("samples_to_threshold", _counted), ("samples_to_threshold_paper", _paper)):
+            out_methods[result.method][key] = [
+                _json_samples(samples_to_threshold(curve["samples"], returns, comparison.threshold, counts))
+                if comparison.meaningful
+                else None
+                for returns, counts in zip(curve["mean_return"], accounting(curve))
+            ]
     experiment.update(
         {
             "compared_seeds": list(comparison.seeds),
@@ -353,6 +330,18 @@ def _experiment(
         }
     )
     return experiment
+
+
+def _counted(curve: dict) -> list[list[float]]:
+    """Per seed and budget, every real-target transition counted (the primary accounting)."""
+    return curve["target_transitions"]
+
+
+def _paper(curve: dict) -> list[list[float]]:
+    """Per seed and budget, the paper's accounting: the counted transitions but the policy rollouts."""
+    return [
+        [t - r for t, r in zip(ts, rs)] for ts, rs in zip(curve["target_transitions"], curve["rollout_transitions"])
+    ]
 
 
 def _read_records(
@@ -386,6 +375,9 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
             # Every real-target transition counted at each budget ([seed][budget]).
             "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
+            # Of those, the real-target transitions of policy rollouts (Algorithm 2's U_M): the
+            # paper's accounting leaves them out ([seed][budget]).
+            "rollout_transitions": [[p.get("rollout_transitions", 0) for p in c] for c in curves],
         },
         "data": recs[seeds_done[0]].get("data", "shared"),
         # Per seed, each evaluation episode's steps at the largest budget (records that have them).
@@ -405,7 +397,6 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
     }
 
 
-AUC_POINTS = 256
 UNKNOWN_KERNELS = "unknown"  # the kernels of records older than their "kernels" field
 STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met warning
 
@@ -438,25 +429,6 @@ def notes(summary: dict) -> list[str]:
                 "expected where the model never matches the target closely, not an error"
             )
     return lines
-
-
-def counted_area(counts: np.ndarray, scores: np.ndarray, low: float, high: float) -> np.ndarray:
-    """Per seed, the mean normalised score over log counted target transitions in [low, high].
-
-    A seed's curve is a step function of the transitions it counted: at x, the score
-    of its last budget whose count is <= x, and 0 (the random policy's) before its
-    first. So a method that counts more transitions for the same budget (Algorithm
-    2's rollouts) is credited later, as the learning curve on counted transitions shows.
-    """
-    grid = np.logspace(np.log10(low), np.log10(high), AUC_POINTS)
-    counts, scores = np.atleast_2d(counts).astype(np.float64), np.atleast_2d(scores).astype(np.float64)
-    out = np.zeros(len(scores))
-    for i, (c, y) in enumerate(zip(counts, scores)):
-        order = np.argsort(c, kind="stable")
-        c, y = c[order], y[order]
-        last = np.searchsorted(c, grid, side="right") - 1
-        out[i] = np.mean(np.where(last >= 0, y[np.maximum(last, 0)], 0.0))
-    return out
 
 
 def _steadiness(experiment: dict) -> None:
@@ -514,7 +486,8 @@ def _survival(experiment: dict, cap: int | None) -> None:
 
 
 def _statistics(experiment: dict, spec: dict) -> None:
-    """Normalised scores, IQM intervals, areas and probabilities of improvement, in place."""
+    """Normalised scores, IQM intervals, the verdict questions' per-seed statistics and the
+    declared pairs' verdicts (``verdicts.judge``), in place."""
     reference = experiment.get("reference_return")
     methods = experiment["methods"]
     comparison = compare(experiment)
@@ -527,54 +500,41 @@ def _statistics(experiment: dict, spec: dict) -> None:
         return
     randoms = np.array([random_by_seed[s] for s in seeds])
     budgets = [float(b) for b in next(iter(methods.values()))["curve"]["samples"]]
-    areas: dict[str, np.ndarray] = {}
-    finals: dict[str, np.ndarray] = {}
+    per_seed: dict[str, dict[str, np.ndarray]] = {q: {} for q in verdicts.QUESTIONS}
+    paper: dict[str, np.ndarray] = {}
     for name, data in methods.items():
         if name not in {r.method for r in comparison.methods}:
             continue
         rows = [data["seeds"].index(s) for s in seeds]
         scores = stats.normalised(np.asarray(data["curve"]["mean_return"])[rows], randoms[:, None], reference)
-        counts = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)[rows]
-        counts = np.where(counts > 0, counts, budgets[0])  # a reference learns nothing: it counts from the start
+        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)[rows]
+        rollouts = np.asarray(data["curve"]["rollout_transitions"], dtype=np.float64)[rows]
+        accountings = {"counted": counted, "paper": counted - rollouts}
+        for key, counts in accountings.items():
+            # A reference learns nothing from the target: its policy stands from the first budget.
+            accountings[key] = np.where(counts > 0, counts, budgets[0])
         data["normalised"] = scores.tolist()
         data["iqm"] = [stats.iqm_interval([scores[:, j]]).as_dict() for j in range(scores.shape[1])]
-        areas[name], finals[name] = counted_area(counts, scores, budgets[0], budgets[-1]), scores[:, -1]
-        data["auc"] = {**stats.iqm_interval([areas[name]]).as_dict(), "per_seed": areas[name].tolist()}
-        data["final_iqm"] = stats.iqm_interval([finals[name]]).as_dict()
-    baselines = [m for m in _baselines() if m in areas]
-    best = max(baselines, key=lambda m: float(stats.iqm(areas[m])), default=None)
-    experiment["best_baseline"] = best
-    experiment["ablations"] = [
-        _pair(method, ablation, areas, finals)
-        for method, ablation in ablation_pairs(spec.get("methods") or {})
-        if method in areas and ablation in areas
-    ]
-    experiment["placebo"] = [
-        _pair(method, placebo, areas, finals)
-        for method, placebo in placebo_pairs(spec.get("methods") or {})
-        if method in areas and placebo in areas
-    ]
-    experiment["vs_best_baseline"] = [
-        _pair(m, best, areas, finals) for m in areas if best is not None and m != best and m not in baselines
-    ]
-
-
-def _pair(method: str, other: str, areas: dict, finals: dict) -> dict:
-    on_area = stats.improvement_interval([(areas[method], areas[other])])
-    at_final = stats.improvement_interval([(finals[method], finals[other])])
-    return {
-        "method": method,
-        "ablation": other,
-        "probability_of_improvement": on_area.as_dict(),
-        "probability_of_improvement_final": at_final.as_dict(),
-        "verdict": stats.verdict(on_area),
-    }
-
-
-def _baselines() -> tuple[str, ...]:
-    from tatl_mj.transfer import registry
-
-    return registry.BASELINES
+        final = scores[:, -1]
+        data["final_iqm"] = stats.iqm_interval([final]).as_dict()
+        areas = {
+            key: stats.efficiency_area(
+                counts, scores, budgets[0], budgets[-1], verdicts.SCORE_FLOOR, verdicts.BEFORE_FIRST_POLICY
+            )
+            for key, counts in accountings.items()
+        }
+        data["efficiency"] = {**stats.iqm_interval([areas["counted"]]).as_dict(), "per_seed": areas["counted"].tolist()}
+        data["efficiency_paper"] = {
+            **stats.iqm_interval([areas["paper"]]).as_dict(),
+            "per_seed": areas["paper"].tolist(),
+        }
+        # What a method paid before its first policy, on each accounting (median over seeds).
+        data["first_policy"] = {key: float(np.median(counts[:, 0])) for key, counts in accountings.items()}
+        per_seed[verdicts.FINAL][name], per_seed[verdicts.EFFICIENCY][name] = final, areas["counted"]
+        paper[name] = areas["paper"]
+    experiment["efficiency_range"] = [budgets[0], budgets[-1]]
+    experiment["families"] = verdicts.family_sizes(spec)
+    experiment["verdicts"] = verdicts.judge(spec, per_seed, paper)
 
 
 def aggregate(experiments: dict) -> dict:
@@ -638,5 +598,6 @@ def build(
         "methods": methods,
         "threshold_fraction": THRESHOLD_FRACTION,
         "reference_threshold": REFERENCE_THRESHOLD,
+        "verdict_rule_version": verdicts.VERDICT_RULE_VERSION,
         **extra,
     }

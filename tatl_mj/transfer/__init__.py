@@ -5,24 +5,61 @@ RL baselines (``methods``), and the interface a user's own method implements (``
 Pure numpy / scipy / scikit-learn: nothing here imports mujoco or a suite domain.
 """
 
-from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping, LinearAlignment, Mapping, align_manifolds
-from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
-from tatl_mj.transfer.features import RBF, Features, LinearFeatures, OneHot, make_features
-from tatl_mj.transfer.fqi import (
-    ExtraTrees,
-    LinearQ,
-    LinearRegressor,
-    QFunction,
-    TabularQ,
-    fitted_q_iteration,
-    make_regressor,
-    q_iteration,
-)
-from tatl_mj.transfer.method import Policy, TransferMethod, TransferProblem
-from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ, TargetFQI
-from tatl_mj.transfer.methods.tatl import TATL
-from tatl_mj.transfer.registry import METHODS
-from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy, TATLStep
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+# Name -> the submodule that defines it. Imported on first use (PEP 562), so importing one
+# submodule (the roles a spec reads) does not load every method and scikit-learn with it.
+_EXPORTS = {
+    "AffineMapping": "alignment",
+    "IdentityMapping": "alignment",
+    "LinearAlignment": "alignment",
+    "Mapping": "alignment",
+    "align_manifolds": "alignment",
+    "Apprentice": "apprentice",
+    "fit_apprentice": "apprentice",
+    "learn_apprentice": "apprentice",
+    "RBF": "features",
+    "Features": "features",
+    "LinearFeatures": "features",
+    "OneHot": "features",
+    "make_features": "features",
+    "ExtraTrees": "fqi",
+    "LinearQ": "fqi",
+    "LinearRegressor": "fqi",
+    "QFunction": "fqi",
+    "fitted_q_iteration": "fqi",
+    "make_regressor": "fqi",
+    "Policy": "method",
+    "TransferMethod": "method",
+    "TransferProblem": "method",
+    "RL": "methods.target_fqi",
+    "UMATL": "methods.target_fqi",
+    "MappedQ": "methods.target_fqi",
+    "TargetFQI": "methods.target_fqi",
+    "TATL": "methods.tatl",
+    "METHODS": "registry",
+    "TabularQ": "tabular_q",
+    "q_iteration": "tabular_q",
+    "DiscreteTATLPolicy": "tatl",
+    "TATLPolicy": "tatl",
+    "TATLStep": "tatl",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value  # once: later lookups do not come back here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])
+
 
 __all__ = [
     "AffineMapping",

@@ -39,17 +39,16 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse
 from scipy.spatial import distance
-from sklearn import neighbors
 
 from tatl_mj.transfer.features import as_states, periodic_mask, wrap_angle
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import integer, number
+from tatl_mj.validation import Boolean, Constraints, Interval, ListOf, check_settings, integer
 
 
 @runtime_checkable
@@ -178,6 +177,8 @@ def _standardiser(x: np.ndarray, name: str, whiten: bool) -> tuple[np.ndarray, n
 
 def _knn_graph(z: np.ndarray, k: int) -> scipy.sparse.csr_matrix:
     """Symmetric k-nearest-neighbour graph with heat-kernel weights (bandwidth: median distance)."""
+    from sklearn import neighbors  # scikit-learn takes seconds to import: only where a graph is built
+
     graph = neighbors.kneighbors_graph(z, k, mode="distance", include_self=False)
     scale = np.median(graph.data)
     graph.data = np.exp(-((graph.data / scale) ** 2) / 2.0)
@@ -191,6 +192,8 @@ def local_geometry(z: np.ndarray, k: int) -> np.ndarray:
     (W&M 2009's local distance matrix R_i, made independent of the neighbours'
     order), in units of the set's median nearest-neighbour distance.
     """
+    from sklearn import neighbors
+
     _, idx = neighbors.NearestNeighbors(n_neighbors=k + 1).fit(z).kneighbors(z)
     patches = z[idx]  # (N, k+1, d), the point itself first
     diff = patches[:, :, None, :] - patches[:, None, :, :]
@@ -395,16 +398,16 @@ class TransitionAlignment:
     rates: tuple[float, ...] = tuple(float(r) for r in np.geomspace(0.125, 8.0, 13))
     sign_flips: bool = True
 
+    constraints: ClassVar[Constraints] = {
+        "n_neighbors": [Interval(int, 2)],
+        "mu": [Interval(float, 0, closed="right")],
+        "max_samples": [Interval(int, 10)],
+        "rates": [ListOf(Interval(float, 0, closed="right"), nonempty=True)],
+        "sign_flips": [Boolean()],
+    }
+
     def __post_init__(self) -> None:
-        integer("TransitionAlignment", "n_neighbors", self.n_neighbors, 2)
-        integer("TransitionAlignment", "max_samples", self.max_samples, 10)
-        number("TransitionAlignment", "mu", self.mu, 0.0, low_open=True)
-        rates = np.asarray(self.rates, dtype=np.float64).ravel() if np.ndim(self.rates) in (0, 1) else None
-        if rates is None or len(rates) == 0 or not np.all(np.isfinite(rates) & (rates > 0)):
-            raise ValueError(f"TransitionAlignment.rates must be a non-empty list of numbers > 0, got {self.rates!r}")
-        if not isinstance(self.sign_flips, bool):
-            raise ValueError(f"TransitionAlignment.sign_flips must be true or false, got {self.sign_flips!r}")
-        object.__setattr__(self, "rates", tuple(rates.tolist()))
+        check_settings(self)
 
     @staticmethod
     def from_dict(table: dict[str, Any]) -> "TransitionAlignment":

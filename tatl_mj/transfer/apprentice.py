@@ -264,36 +264,12 @@ def learn_apprentice(
     out again, nor refitted if it missed zeta, unless it is the last. Either
     way the result is the same.
     """
-    if not isinstance(transitions, Transitions):
-        raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
-    actions = np.asarray(action_set, dtype=np.float64)
-    actions = actions[:, None] if actions.ndim == 1 else actions
-    if actions.ndim != 2 or not np.all(np.isfinite(actions)):
-        raise ValueError(f"action_set must be a finite (n_actions, m) array, got shape {np.shape(action_set)}")
-    if len(transitions) and (transitions.actions.min() < 0 or transitions.actions.max() >= len(actions)):
-        raise ValueError(f"transitions.actions must index action_set (0..{len(actions) - 1})")
-    integer("", "batch", batch, 1)
-    if not (math.isfinite(zeta) and zeta >= 0):
-        raise ValueError(f"zeta must be a finite number >= 0, got {zeta!r}")
+    actions = _action_matrix(transitions, action_set, batch, zeta)
     total = len(transitions)
-    if total == 0:
-        raise ValueError("transitions is empty; the apprentice needs samples")
     periodic = periodic_mask(periodic, transitions.states.shape[1])  # bad masks fail here, not per batch
     sizes = list(range(batch, total, batch)) + [total]
     known = {} if gaps is None else gaps
-    fits: dict[int, Apprentice | ValueError] = {}
-
-    def fit(n: int) -> Apprentice | ValueError:
-        if n not in fits:
-            head = transitions.head(n)
-            try:
-                fits[n] = fit_apprentice(
-                    head.states, actions[head.actions], head.next_states, features, ridge, periodic
-                )
-            except ValueError as error:  # too few or too uniform samples yet: grow the set
-                fits[n] = error
-        return fits[n]
-
+    fit = _HeadFits(transitions, actions, features, ridge, periodic)
     last_error: ValueError | None = None
     apprentice: Apprentice | None = None
     ahead = 1  # how many sizes' gaps the next call of utility_gaps finds
@@ -305,20 +281,8 @@ def learn_apprentice(
             last_error = result
             continue
         apprentice = result
-        if n not in known and utility_gaps is None:
-            known[n] = float(utility_gap(apprentice))
-        elif n not in known:
-            # This size and the next ones, fitted now and rolled out together; the
-            # chunk doubles, so a scan that stops early wastes at most its own work.
-            chunk = [n]
-            for m in sizes[i + 1 :]:
-                if len(chunk) == ahead:
-                    break
-                if m not in known and not isinstance(fit(m), ValueError):
-                    chunk.append(m)
-            for m, gap in zip(chunk, utility_gaps([fits[m] for m in chunk])):
-                known[m] = float(gap)
-            ahead *= 2
+        if n not in known:
+            ahead = _find_gaps(sizes, i, apprentice, fit, known, utility_gap, utility_gaps, ahead)
         gap = known[n]
         if not math.isfinite(gap):
             raise ValueError(f"utility_gap returned {gap} for an apprentice fitted on {n} samples")
@@ -332,6 +296,78 @@ def learn_apprentice(
         stacklevel=2,
     )
     return apprentice, total
+
+
+def _action_matrix(transitions: Transitions, action_set: np.ndarray, batch: int, zeta: float) -> np.ndarray:
+    """Algorithm 2's inputs checked; the action set as an (n_actions, m) matrix."""
+    if not isinstance(transitions, Transitions):
+        raise ValueError(f"transitions must be a Transitions, got {type(transitions).__name__}")
+    actions = np.asarray(action_set, dtype=np.float64)
+    actions = actions[:, None] if actions.ndim == 1 else actions
+    if actions.ndim != 2 or not np.all(np.isfinite(actions)):
+        raise ValueError(f"action_set must be a finite (n_actions, m) array, got shape {np.shape(action_set)}")
+    if len(transitions) and (transitions.actions.min() < 0 or transitions.actions.max() >= len(actions)):
+        raise ValueError(f"transitions.actions must index action_set (0..{len(actions) - 1})")
+    integer("", "batch", batch, 1)
+    if not (math.isfinite(zeta) and zeta >= 0):
+        raise ValueError(f"zeta must be a finite number >= 0, got {zeta!r}")
+    if len(transitions) == 0:
+        raise ValueError("transitions is empty; the apprentice needs samples")
+    return actions
+
+
+@dataclasses.dataclass
+class _HeadFits:
+    """The apprentice on the first n transitions, for each n asked, fitted once; the
+    ValueError instead where n samples are too few or too uniform for a full-rank fit."""
+
+    transitions: Transitions
+    actions: np.ndarray
+    features: Features
+    ridge: float
+    periodic: tuple[bool, ...] | None
+    fits: dict[int, Apprentice | ValueError] = dataclasses.field(default_factory=dict)
+
+    def __call__(self, n: int) -> Apprentice | ValueError:
+        if n not in self.fits:
+            head = self.transitions.head(n)
+            try:
+                self.fits[n] = fit_apprentice(
+                    head.states, self.actions[head.actions], head.next_states, self.features, self.ridge, self.periodic
+                )
+            except ValueError as error:  # too few or too uniform samples yet: grow the set
+                self.fits[n] = error
+        return self.fits[n]
+
+
+def _find_gaps(
+    sizes: list[int],
+    i: int,
+    apprentice: Apprentice,
+    fit: _HeadFits,
+    known: dict[int, float],
+    utility_gap: Callable[[Apprentice], float],
+    utility_gaps: Callable[[list[Apprentice]], Sequence[float]] | None,
+    ahead: int,
+) -> int:
+    """Fills ``known`` with the gap of ``apprentice``, the fit on the first ``sizes[i]``
+    samples, and, with ``utility_gaps``, those of up to ``ahead - 1`` next sizes, fitted
+    now and rolled out together. Returns the next call's ``ahead``."""
+    if utility_gaps is None:
+        known[sizes[i]] = float(utility_gap(apprentice))
+        return ahead
+    # This size and the next ones, fitted now and rolled out together; the
+    # chunk doubles, so a scan that stops early wastes at most its own work.
+    chunk = [(sizes[i], apprentice)]
+    for m in sizes[i + 1 :]:
+        if len(chunk) == ahead:
+            break
+        fitted = fit(m) if m not in known else None
+        if isinstance(fitted, Apprentice):
+            chunk.append((m, fitted))
+    for (m, _), gap in zip(chunk, utility_gaps([a for _, a in chunk])):
+        known[m] = float(gap)
+    return ahead * 2
 
 
 def state_snap(target: TaskDescription) -> Callable[[np.ndarray], np.ndarray] | None:

@@ -30,7 +30,7 @@ from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-from tatl_mj.validation import integer
+from tatl_mj.validation import Constraint, InvalidSetting, integer
 
 TWO_PI = 2.0 * np.pi
 
@@ -465,13 +465,64 @@ def _make_features(spec: dict[str, Any], state_dim: int) -> Features:
     return rbf
 
 
+class FeaturesSpec(Constraint):
+    """A settings constraint: a features spec :func:`make_features` accepts (its keys and kinds;
+    the sizes that need the task's state are checked by :func:`check_features`)."""
+
+    def convert(self, value: Any) -> Any:
+        make_features(value, _probe_dim(value))  # ValueError: why not
+        return value
+
+    def invalid(self) -> Any:
+        return {"kind": "no-such-kind"}
+
+    def __str__(self) -> str:
+        return "a features table (make_features)"
+
+
+def _probe_dim(spec: Any) -> int:
+    """A state size that a basis spec can be built with, to check its keys before the task is known."""
+    if isinstance(spec, dict):
+        for key in ("low", "periodic"):
+            if isinstance(spec.get(key), (list, tuple)):
+                return len(spec[key])
+        if spec.get("kind") == "onehot":
+            return 2
+    return 1
+
+
+def check_features(owner: str, field: str, spec: Any, state_dim: int) -> None:
+    """A basis spec builds for a task of ``state_dim`` coordinates (its sizes fit), else one line."""
+    try:
+        make_features(spec, state_dim)
+    except ValueError as error:
+        raise InvalidSetting(f"{owner}.{field}: {error}") from None
+
+
+class Periodic(Constraint):
+    """A settings constraint: a per-coordinate periodic mask (:func:`periodic_mask`), as a tuple
+    of bools, or None where no entry is True."""
+
+    def convert(self, value: Any) -> Any:
+        return periodic_mask(value)
+
+    def invalid(self) -> Any:
+        return ("yes",)
+
+    def __str__(self) -> str:
+        return "a list of true/false, one per state coordinate"
+
+
 __all__ = [
     "FEATURE_KINDS",
     "Features",
+    "FeaturesSpec",
     "LinearFeatures",
     "OneHot",
+    "Periodic",
     "RBF",
     "as_states",
+    "check_features",
     "make_features",
     "periodic_difference",
     "periodic_mask",

@@ -20,30 +20,26 @@ Two regressors are provided:
 - :class:`ExtraTrees`: scikit-learn's extremely randomised trees on the input
   ``(s, a)`` as in Ernst et al. (50 trees, min_samples_split 5, min_samples_leaf 2).
 
-:func:`q_iteration` is exact value iteration over a known deterministic tabular model
-(the grid-world source task, which the paper solves by Q-Iteration).
+Exact Q-iteration on a known tabular model (the grid-world source, which the paper
+solves by Q-Iteration) is ``tatl_mj.transfer.tabular_q``; the seconds this process
+spends in :func:`fitted_q_iteration` are metered by ``tatl_mj.transfer.fit_time``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
-import time
-from typing import Any, Callable, ParamSpec, Protocol, TypeVar, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse
 import threadpoolctl
-from sklearn import ensemble
 
+from tatl_mj.transfer import fit_time
 from tatl_mj.transfer.features import Features, OneHot, as_states, make_features
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import choice, integer
-
-_P = ParamSpec("_P")
-_R = TypeVar("_R")
 
 
 @runtime_checkable
@@ -183,7 +179,7 @@ class LinearQ:
 class TreeQ:
     """A scikit-learn forest over inputs ``[s, a]`` (a: the action index)."""
 
-    forest: ensemble.ExtraTreesRegressor
+    forest: Any  # sklearn.ensemble.ExtraTreesRegressor (imported where a tree is fitted)
     n_actions: int
     state_dim: int
 
@@ -247,29 +243,6 @@ def greedy_each(q: QFunction, states: np.ndarray) -> np.ndarray:
 
 # --- FQI ----------------------------------------------------------------------
 
-# Seconds this process has spent in fitted_q_iteration: with the physics, the part of a
-# run's work that code keeping every fit cannot save (a run reports both).
-_FIT_SECONDS = [0.0]
-
-
-def fqi_seconds() -> float:
-    """Seconds this process has spent in :func:`fitted_q_iteration` so far."""
-    return _FIT_SECONDS[0]
-
-
-def _timed(fit: Callable[_P, _R]) -> Callable[_P, _R]:
-    """``fit``, its seconds added to :func:`fqi_seconds`."""
-
-    @functools.wraps(fit)
-    def timed(*args: _P.args, **kwargs: _P.kwargs) -> _R:
-        start = time.perf_counter()
-        try:
-            return fit(*args, **kwargs)
-        finally:
-            _FIT_SECONDS[0] += time.perf_counter() - start
-
-    return timed
-
 
 def _check_fqi_inputs(
     transitions: Transitions, n_actions: int, gamma: float, iterations: int, initial_q: QFunction | None
@@ -289,7 +262,7 @@ def _check_fqi_inputs(
         raise ValueError(f"initial_q has {initial_q.n_actions} actions, expected n_actions={n_actions}")
 
 
-@_timed
+@fit_time.timed
 def fitted_q_iteration(
     transitions: Transitions,
     n_actions: int,
@@ -544,6 +517,8 @@ def _fqi_trees(
     taken = 0.0 if prior is None else prior.values(t.states)[np.arange(len(t)), t.actions]
     for _ in range(iterations):
         y = t.rewards + continues * q.values(t.next_states).max(axis=1) - taken
+        from sklearn import ensemble  # scikit-learn takes seconds to import: only where trees are grown
+
         forest = ensemble.ExtraTreesRegressor(
             n_estimators=reg.n_estimators,
             min_samples_split=reg.min_samples_split,
@@ -558,120 +533,6 @@ def _fqi_trees(
     return q
 
 
-# --- Exact Q-iteration on a tabular model -------------------------------------
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class TabularQ:
-    """Q as a table q (S, n_actions).
-
-    ``values``/``greedy`` take either (N,) integer state indices, or (N, 2)
-    ``[row, col]`` cells when ``cells`` (S, 2), the cell of each index (the grid
-    world's ``cells`` array), was given. A cell not in ``cells`` raises ValueError.
-    """
-
-    q: np.ndarray
-    cells: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        q = np.asarray(self.q, dtype=np.float64)
-        if q.ndim != 2:
-            raise ValueError(f"TabularQ.q must be (S, n_actions), got shape {q.shape}")
-        object.__setattr__(self, "q", q)
-        if self.cells is not None:
-            cells = np.asarray(self.cells)
-            if cells.shape != (len(q), 2) or np.any(cells != np.rint(cells)) or cells.min() < 0:
-                raise ValueError(f"TabularQ.cells must be ({len(q)}, 2) non-negative integers [row, col]")
-            cells = cells.astype(np.int64)
-            lookup = np.full((cells[:, 0].max() + 1, cells[:, 1].max() + 1), -1, dtype=np.int64)
-            lookup[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
-            object.__setattr__(self, "cells", cells)
-            object.__setattr__(self, "_lookup", lookup)
-
-    @property
-    def n_actions(self) -> int:
-        return self.q.shape[1]
-
-    def index(self, states: np.ndarray) -> np.ndarray:
-        """State indices (N,) from indices (N,) or [row, col] cells (N, 2)."""
-        s = np.asarray(states)
-        if s.ndim == 1:
-            idx = s.astype(np.int64)
-            if np.any(idx != s) or np.any((idx < 0) | (idx >= len(self.q))):
-                raise ValueError(f"TabularQ state indices must be integers in 0..{len(self.q) - 1}")
-            return idx
-        if self.cells is None:
-            raise ValueError("TabularQ got [row, col] states but was built without cells; pass indices")
-        if s.shape == (1, 2):  # a policy stepped one cell a call: the same index, without array checks
-            row, col = float(s[0, 0]), float(s[0, 1])
-            r, c = round(row), round(col)  # half to even, as np.rint
-            shape = self._lookup.shape
-            if abs(row - r) <= 1e-9 and abs(col - c) <= 1e-9 and 0 <= r < shape[0] and 0 <= c < shape[1]:
-                found = int(self._lookup[r, c])
-                if found >= 0:
-                    return np.array([found], dtype=np.int64)
-        rc = as_states(s, dim=2)
-        cells = np.rint(rc).astype(np.int64)
-        lookup = self._lookup
-        inside = (
-            (cells[:, 0] >= 0) & (cells[:, 0] < lookup.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < lookup.shape[1])
-        )
-        if (np.abs(rc - cells) > 1e-9).any() or not inside.all():  # methods: called one state at a time
-            raise ValueError("TabularQ states must be [row, col] cells of the grid")
-        idx = lookup[cells[:, 0], cells[:, 1]]
-        if (idx < 0).any():
-            raise ValueError(f"TabularQ states {cells[idx < 0][:3].tolist()} are not cells of the grid")
-        return idx
-
-    def values(self, states: np.ndarray) -> np.ndarray:
-        return self.q[self.index(states)]
-
-    def greedy(self, states: np.ndarray) -> np.ndarray:
-        return _argmax(self.values(states))
-
-
-def q_iteration(
-    next_state: np.ndarray,
-    reward: np.ndarray,
-    absorbing: np.ndarray,
-    gamma: float,
-    tol: float = 1e-10,
-    cells: np.ndarray | None = None,
-) -> TabularQ:
-    """Exact Q-iteration on a deterministic tabular model (Bellman optimality, to ``tol``).
-
-    ``Q(s, a) = reward[s, a] + gamma * (1 - absorbing[s, a]) * max_b Q(next_state[s, a], b)``,
-    iterated from 0 until the largest change is below ``tol`` (a gamma-contraction,
-    so it converges for gamma < 1). ``cells`` (S, 2) lets the result take [row, col] states.
-    """
-    nxt = np.asarray(next_state)
-    r = np.asarray(reward, dtype=np.float64)
-    done = np.asarray(absorbing, dtype=bool)
-    if nxt.ndim != 2 or r.shape != nxt.shape or done.shape != nxt.shape:
-        raise ValueError(f"next_state, reward, absorbing must all be (S, A); got {nxt.shape}, {r.shape}, {done.shape}")
-    if not np.all(np.isfinite(r)):
-        raise ValueError("reward contains NaN or infinite values")
-    if np.any(nxt != np.rint(nxt)) or nxt.min() < 0 or nxt.max() >= len(nxt):
-        raise ValueError(f"next_state must hold state indices in 0..{len(nxt) - 1}")
-    if not (isinstance(gamma, (int, float)) and 0.0 <= gamma < 1.0):
-        raise ValueError(f"gamma must be in [0, 1), got {gamma!r}")
-    if not tol > 0:
-        raise ValueError(f"tol must be > 0, got {tol!r}")
-    nxt = nxt.astype(np.int64)
-    continues = gamma * (~done)
-    # Contraction bound: |Q_k - Q*| <= gamma^k |r|_max / (1 - gamma).
-    bound = np.abs(r).max() / (1.0 - gamma) if gamma > 0 else 0.0
-    limit = 1 + (math.ceil(math.log(tol / bound) / math.log(gamma)) if gamma > 0 and bound > tol else 1)
-    q = np.zeros_like(r)
-    for _ in range(limit + 10):
-        new = r + continues * q.max(axis=1)[nxt]
-        change = np.abs(new - q).max()
-        q = new
-        if change < tol:
-            break
-    return TabularQ(q, cells)
-
-
 __all__ = [
     "ExtraTrees",
     "LinearQ",
@@ -681,11 +542,19 @@ __all__ = [
     "REGRESSOR_KINDS",
     "Regressor",
     "ResidualQ",
-    "TabularQ",
     "TreeQ",
     "ZeroQ",
     "fitted_q_iteration",
     "greedy_each",
     "make_regressor",
-    "q_iteration",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # Source caches (source.pkl) pickled before tabular Q-iteration moved to tabular_q name
+    # its class here; a resumed run still reads them.
+    if name == "TabularQ":
+        from tatl_mj.transfer.tabular_q import TabularQ
+
+        return TabularQ
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -27,7 +27,6 @@ import numpy as np
 from tatl_mj.description import TaskDescription
 from tatl_mj.policy import StatePolicy
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.features import make_features
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
@@ -53,7 +52,8 @@ class TransferProblem:
         control steps, a known model where there is one.
       seed: seeds every random choice a method makes.
       target_return: U_M(pi), the mean return of a policy on the real target under
-        the experiment's evaluation protocol (no target samples are handed out).
+        the experiment's evaluation protocol (no target samples are handed out);
+        ``target_return(policy, episodes=k)`` over its first k episodes' starts.
       model_return: U_Mhat(pi), the same policy's mean return when ``model`` stands
         in for the target (the target task's reward and end conditions applied to
         the model's predicted states); None where the task has no such reward.
@@ -142,28 +142,32 @@ class TransferProblem:
         """Whether Algorithm 2's utility gap can be computed (both hooks given)."""
         return self.target_return is not None and self.model_return is not None
 
-    def utility_gap(self, model: Model, kind: str = "absolute") -> float:
+    def utility_gap(self, model: Model, kind: str = "absolute", episodes: int | None = None) -> float:
         """Algorithm 2's gap between U_M(pi) and U_Mhat(pi) for the projected source policy.
 
         ``"absolute"`` (the paper's): U_M - U_Mhat, compared one-sided with zeta;
         ``"relative"``: |U_M - U_Mhat| / |U_M|. Both come from the same start
-        states (the problem's hooks say which), and U_M's real-target rollouts are
-        counted against the method that asks. A model whose rollout diverges is as
-        far from the target as can be (1e300).
+        states (the problem's hooks say which), ``episodes`` of them (Algorithm 2's
+        k trials; None: the hooks' own number, the evaluation protocol's), and U_M's
+        real-target rollouts are counted against the method that asks. A model
+        whose rollout diverges is as far from the target as can be (1e300).
         """
-        return self.utility_gaps([model], kind)[0]
+        return self.utility_gaps([model], kind, episodes)[0]
 
-    def utility_gaps(self, models: Sequence[Model], kind: str = "absolute") -> list[float]:
+    def utility_gaps(self, models: Sequence[Model], kind: str = "absolute", episodes: int | None = None) -> list[float]:
         """:meth:`utility_gap` of each of ``models``, their U_Mhat in one ``model_returns`` call where given."""
         if not self.has_utility_gap:
             raise ValueError("this problem has no target_return/model_return hooks: no utility gap")
         assert self.target_return is not None and self.model_return is not None
         policy = self.projected_source_policy()
-        u_true = float(self.target_return(policy))
+        # Only a chosen number of episodes is passed on: hooks written before the
+        # keyword existed keep working with their own.
+        more = {} if episodes is None else {"episodes": episodes}
+        u_true = float(self.target_return(policy, **more))
         if self.model_returns is not None:
-            u_hats = list(self.model_returns(models, policy))
+            u_hats = list(self.model_returns(models, policy, **more))
         else:
-            u_hats = [self.model_return(model, policy) for model in models]
+            u_hats = [self.model_return(model, policy, **more) for model in models]
         return [_gap(u_true, u_hat, kind) for u_hat in u_hats]
 
 
@@ -199,6 +203,13 @@ class TransferMethod(Protocol):
       ``tatl run`` computes it once (default True);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n).
+
+    A method class declares what each of its settings admits in a class-level table,
+    ``constraints`` (``tatl_mj.validation``; the built-ins' in their modules): a spec's
+    settings are checked and converted against it before the class is called
+    (:func:`tatl_mj.transfer.registry.resolve`), and a class that calls
+    ``validation.check_settings(self)`` in ``__post_init__`` is checked when built
+    in Python too.
     """
 
     name: str
@@ -258,25 +269,6 @@ def samples_used(policy: Any, budget: int) -> int:
     return int(budget) if reported is None else int(reported)
 
 
-def check_features(owner: str, field: str, spec: Any, state_dim: int | None = None) -> None:
-    """A basis spec's keys and kind are valid (and, given ``state_dim``, its sizes)."""
-    try:
-        make_features(spec, state_dim if state_dim is not None else _probe_dim(spec))
-    except ValueError as error:
-        raise ValueError(f"{owner}.{field}: {error}") from None
-
-
-def _probe_dim(spec: Any) -> int:
-    """A state size that a basis spec can be built with, to check its keys before the task is known."""
-    if isinstance(spec, dict):
-        for key in ("low", "periodic"):
-            if isinstance(spec.get(key), (list, tuple)):
-                return len(spec[key])
-        if spec.get("kind") == "onehot":
-            return 2
-    return 1
-
-
 __all__ = [
     "Contract",
     "Model",
@@ -285,7 +277,6 @@ __all__ = [
     "TransferMethod",
     "TransferProblem",
     "Withheld",
-    "check_features",
     "contract",
     "samples_used",
 ]

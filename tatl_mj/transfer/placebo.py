@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tatl_mj.transfer.fqi import LinearQ, QFunction, TabularQ
+from tatl_mj.transfer.fqi import LinearQ, QFunction
+from tatl_mj.transfer.tabular_q import TabularQ
 
 SOURCES = ("trained", "placebo")
 """A method's ``source`` setting: the source Q learned in Phase I, or its placebo."""

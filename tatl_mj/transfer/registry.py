@@ -1,17 +1,22 @@
-"""The one list of built-in transfer methods, by the names specs, the CLI and reports use.
+"""The one list of built-in transfer methods, and the one resolver of a method's name.
 
 Each name maps to a factory that takes the method's settings as keyword
 arguments (an experiment spec's ``[methods.NAME]`` table) and returns the method
 object. A plug-in method is any object with ``name`` and ``learn`` (see
-``tatl_mj.transfer.method``); it needs no entry here.
+``tatl_mj.transfer.method``); it needs no entry here: :func:`resolve` finds it by
+import path, ``"module:attribute"``, for the CLI, the spec loader and the runner
+alike. The methods' roles in the reports live apart, in ``tatl_mj.transfer.roles``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
+import typing
 from typing import Any, Callable
 
+from tatl_mj import plugins
 from tatl_mj.transfer.method import TransferMethod
 from tatl_mj.transfer.methods.horizon import HorizonTATL
 from tatl_mj.transfer.methods.model_based import ApprenticeFQI
@@ -19,6 +24,8 @@ from tatl_mj.transfer.methods.projected import ProjectedSource
 from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanTATL
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
 from tatl_mj.transfer.methods.tatl import TATL
+from tatl_mj.transfer.roles import PAIR_KEYS, VARIANT_KEY, base_of, plugin_path
+from tatl_mj.validation import checked_settings
 
 METHODS: dict[str, Callable[..., TransferMethod]] = {
     # The paper's rule (Algorithms 1 and 2) and its two baselines.
@@ -45,50 +52,19 @@ METHODS: dict[str, Callable[..., TransferMethod]] = {
 }
 """Built-in methods: name -> factory(**settings)."""
 
-SOURCE_FREE = ("rl", "rl-reset", "rl-online", "apprentice-fqi", "apprentice-upright", "replan-no-source")
-"""Methods that never look at the source: the ablations a transfer win is measured against."""
 
-ABLATION_OF: dict[str, tuple[str, ...]] = {
-    "ta-tl": ("apprentice-fqi", "replan-no-source"),
-    "ta-tl-h": ("apprentice-upright",),
-    "ta-tl-replan": ("replan-no-source",),
-    "ta-tl-replan-protocol": ("replan-no-source",),
-    "uma-tl": ("rl",),
-    "uma-tl-prior": ("rl",),
-    "uma-tl-reset": ("rl-reset",),
-}
-"""Transfer method -> the built-ins that are the same method without the source, in
-order of preference: the first a spec lists is the one a win must beat to be credited
-to transfer (``ta-tl``: the model-based learner on its own apprentice; on the grid,
-whose targets are cells, the planner on the tabular apprentice)."""
-
-BASELINES = ("uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset")
-"""The comparison methods (reports compare every other method with them); ``-reset``
-ones use privileged simulator resets."""
-
-
-VARIANT_KEY = "method"
-"""A spec's ``[methods.NAME]`` table may name a built-in here (``method = "ta-tl-h"``):
-NAME is then a variant of it with these settings, reported under NAME (an ablation
-such as ``ta-tl-h-no-cart``). Without it, NAME is the built-in itself."""
-
-
-def base_of(name: str, settings: dict[str, Any] | None = None) -> str:
-    """The built-in a method table builds: its ``method`` key, else its own name."""
-    base = (settings or {}).get(VARIANT_KEY, name)
-    if not isinstance(base, str):
-        raise ValueError(f"{VARIANT_KEY!r} of method {name!r} must name a built-in method, got {base!r}")
-    if base != name and name in METHODS:
-        raise ValueError(f"method {name!r} is a built-in; a variant of {base!r} needs a name of its own")
-    return base
+def class_of(name: str) -> type:
+    """The class a built-in's factory builds."""
+    factory = _factory(name)
+    return typing.cast(type, factory.func if isinstance(factory, functools.partial) else factory)
 
 
 def settings_of(name: str) -> tuple[str, ...]:
     """The setting names a built-in method accepts (its constructor's fields, bar those fixed by the name)."""
     factory = _factory(name)
     fixed = set(factory.keywords) if isinstance(factory, functools.partial) else set()
-    cls = factory.func if isinstance(factory, functools.partial) else factory
-    return tuple(f.name for f in dataclasses.fields(cls) if f.init and f.name != "name" and f.name not in fixed)
+    fields = dataclasses.fields(class_of(name))
+    return tuple(f.name for f in fields if f.init and f.name != "name" and f.name not in fixed)
 
 
 def _factory(name: str) -> Callable[..., TransferMethod]:
@@ -107,19 +83,79 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def _settings(settings: dict[str, Any] | None) -> dict[str, Any]:
+    """A table's settings: its keys other than ``method`` and the pair keys, arrays as tuples."""
+    return {k: _plain(v) for k, v in (settings or {}).items() if k not in (VARIANT_KEY, *PAIR_KEYS)}
+
+
 def build(name: str, settings: dict[str, Any] | None = None) -> TransferMethod:
     """The built-in method ``name`` (or the variant ``name`` of ``settings["method"]``) with
     ``settings``; ValueError naming an unknown or bad setting."""
     base = base_of(name, settings)
+    if base != name and name in METHODS:
+        raise ValueError(f"method {name!r} is a built-in; a variant of {base!r} needs a name of its own")
     factory = _factory(base)
-    settings = {k: v for k, v in (settings or {}).items() if k != VARIANT_KEY}
+    given = _settings(settings)
     valid = settings_of(base)
-    unknown = sorted(set(settings) - set(valid))
+    unknown = sorted(set(given) - set(valid))
     if unknown:
         raise ValueError(
-            f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: {sorted([*valid, VARIANT_KEY])}"
+            f"unknown setting {unknown[0]!r} for method {name!r}; valid settings: "
+            f"{sorted([*valid, VARIANT_KEY, *PAIR_KEYS])}"
         )
-    return factory(**{k: _plain(v) for k, v in settings.items()}, name=name)
+    return factory(**given, name=name)  # the class checks its settings (its constraints)
 
 
-__all__ = ["ABLATION_OF", "BASELINES", "METHODS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "build", "settings_of"]
+def resolve(method: Any, settings: dict[str, Any] | None = None, label: str | None = None) -> TransferMethod:
+    """The transfer method ``method`` stands for; ValueError (one line) where it stands for none.
+
+    ``method``: a built-in's name; a spec table's name, whose ``settings`` build a
+    built-in, a variant of one (``method = "<built-in>"``) or a user's own class
+    (``method = "module:attribute"``, called with the other settings and
+    ``name=`` the table's name where it takes one); ``"module:attribute"`` itself
+    (a class called without settings, or an instance: the CLI's ``--methods``); or
+    a method object, returned as it is once it meets the contract (``label``: the
+    name it was given under, for the message).
+    """
+    if not isinstance(method, str):
+        return _contracted(method, label if label is not None else repr(method))
+    path = method if ":" in method else plugin_path(settings)
+    if path is None:
+        return build(method, settings)
+    if path != method and method in METHODS:
+        raise ValueError(f"method {method!r} is a built-in; your own method {path!r} needs a table name of its own")
+    obj = plugins.load(path, "method")
+    given = _settings(settings)
+    if isinstance(obj, type):
+        obj = _construct(obj, path, given, None if path == method else method)
+    elif given:
+        raise ValueError(f"method {path!r} is an instance, not a class: it takes no settings, got {sorted(given)}")
+    return _contracted(obj, path)
+
+
+def _construct(cls: type, path: str, given: dict[str, Any], name: str | None) -> Any:
+    """``cls`` called with the settings (checked against its ``constraints`` where it declares
+    them) and ``name`` where its constructor takes one."""
+    if name is not None:
+        if "name" in given:
+            raise ValueError(f"method {path!r}: 'name' is the table's name ({name!r}), not a setting")
+        try:
+            parameters = list(inspect.signature(cls).parameters.values())
+        except (TypeError, ValueError):
+            parameters = []
+        if any(p.name == "name" or p.kind is p.VAR_KEYWORD for p in parameters):
+            given = {**given, "name": name}
+    given = checked_settings(cls, given)
+    try:
+        return cls(**given)
+    except TypeError as error:
+        raise ValueError(f"method {path!r}: {path.partition(':')[2]}(**settings) failed: {error}") from None
+
+
+def _contracted(obj: Any, label: str) -> TransferMethod:
+    if not isinstance(obj, TransferMethod):
+        raise ValueError(f"method {label!r} is not a TransferMethod (needs a name and learn(problem, samples))")
+    return obj
+
+
+__all__ = ["METHODS", "build", "class_of", "resolve", "settings_of"]

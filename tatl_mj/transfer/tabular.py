@@ -59,7 +59,7 @@ import numpy as np
 
 from tatl_mj.description import CellMap
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.fqi import TabularQ, q_iteration
+from tatl_mj.transfer.tabular_q import TabularQ, q_iteration
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import integer
 
@@ -112,7 +112,7 @@ class TabularModel:
         return self.next_state.shape[1]
 
     def q(self, gamma: float, tol: float = 1e-10) -> TabularQ:
-        """Exact Q-iteration on this model (``fqi.q_iteration``), over cell indices."""
+        """Exact Q-iteration on this model (``tabular_q.q_iteration``), over cell indices."""
         return q_iteration(self.next_state, self.reward, self.absorbing, gamma, tol)
 
 

@@ -32,7 +32,7 @@ angle of -3.1 against a prediction of 3.1 is a gap of 0.08, not -6.2.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction
+from tatl_mj.validation import Array, Constraints, Function, check_settings
 
 SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """One batched source-simulator step: (N, dS) states, (N,) action indices -> (N, dS)."""
@@ -59,12 +60,13 @@ class TATLStep:
     action: np.ndarray  # (N, mT) a_T + K pi_ad, clipped or snapped
 
 
-def _as_action_matrix(values: np.ndarray, name: str) -> np.ndarray:
-    a = np.asarray(values, dtype=np.float64)
-    a = a[:, None] if a.ndim == 1 else a
-    if a.ndim != 2 or len(a) == 0 or not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be a finite, non-empty (n, m) array, got shape {np.shape(values)}")
-    return a
+_POLICY: Constraints = {
+    "source_step": [Function("(states (N, dS), action indices (N,)) -> (N, dS)")],
+    "source_actions": [Array(2)],
+    "target_actions": [Array(2)],
+    "adaptive_actions": [None, Array(2)],
+}
+"""What both policies' action settings admit (a 1-D action set is a column)."""
 
 
 def _source_decision(
@@ -82,10 +84,9 @@ def _source_decision(
 
 
 def _check_common(policy: "TATLPolicy | DiscreteTATLPolicy") -> None:
+    check_settings(policy)
     if not isinstance(policy.apprentice, Apprentice):
         raise ValueError(f"apprentice must be an Apprentice, got {type(policy.apprentice).__name__}")
-    if not callable(policy.source_step):
-        raise ValueError("source_step must be callable (states (N, dS), action indices (N,)) -> (N, dS)")
     n_s, n_t = len(policy.source_actions), len(policy.target_actions)
     if n_s != n_t:
         raise ValueError(f"source_actions ({n_s}) and target_actions ({n_t}) must have the same count (Assumption 1)")
@@ -122,12 +123,11 @@ class TATLPolicy:
     samples_used: int | None = None
     K: np.ndarray = dataclasses.field(init=False, repr=False)  # pinv(B_hat), the mixture gain
 
+    constraints: ClassVar[Constraints] = _POLICY
+
     def __post_init__(self) -> None:
-        object.__setattr__(self, "source_actions", _as_action_matrix(self.source_actions, "source_actions"))
-        target = _as_action_matrix(self.target_actions, "target_actions")
-        object.__setattr__(self, "target_actions", target)
         _check_common(self)
-        m = target.shape[1]
+        m = self.target_actions.shape[1]
         if self.apprentice.action_dim != m:
             raise ValueError(f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {m}")
         low = np.broadcast_to(np.asarray(self.target_low, dtype=np.float64), (m,)).copy()
@@ -136,11 +136,9 @@ class TATLPolicy:
             raise ValueError(f"target_low must be <= target_high, got {low} and {high}")
         object.__setattr__(self, "target_low", low)
         object.__setattr__(self, "target_high", high)
-        if self.adaptive_actions is not None:
-            ad = _as_action_matrix(self.adaptive_actions, "adaptive_actions")
-            if ad.shape[1] != m or np.any(ad < low) or np.any(ad > high):
-                raise ValueError(f"adaptive_actions must be (n_ad, {m}) rows within [target_low, target_high]")
-            object.__setattr__(self, "adaptive_actions", ad)
+        ad = self.adaptive_actions
+        if ad is not None and (ad.shape[1] != m or np.any(ad < low) or np.any(ad > high)):
+            raise ValueError(f"adaptive_actions must be (n_ad, {m}) rows within [target_low, target_high]")
         if np.linalg.matrix_rank(self.apprentice.B) < m:
             raise ValueError(
                 f"apprentice.B_hat has rank {np.linalg.matrix_rank(self.apprentice.B)} < {m}: "
@@ -187,15 +185,13 @@ class DiscreteTATLPolicy:
     adaptive_actions: np.ndarray | None = None
     samples_used: int | None = None
 
+    constraints: ClassVar[Constraints] = _POLICY
+
     def __post_init__(self) -> None:
-        object.__setattr__(self, "source_actions", _as_action_matrix(self.source_actions, "source_actions"))
-        target = _as_action_matrix(self.target_actions, "target_actions")
-        object.__setattr__(self, "target_actions", target)
         _check_common(self)
-        if self.apprentice.action_dim != target.shape[1]:
-            raise ValueError(
-                f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {target.shape[1]}"
-            )
+        m = self.target_actions.shape[1]
+        if self.apprentice.action_dim != m:
+            raise ValueError(f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {m}")
 
     def distances(self, target_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, n) |P_hat_T(s_T, a_i) - s_hat_T_next| for every target action, and a_S

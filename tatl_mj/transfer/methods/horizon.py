@@ -62,19 +62,29 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
-from tatl_mj.transfer.features import as_states, periodic_difference, periodic_mask
+from tatl_mj.transfer.features import Periodic, as_states, periodic_difference
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import choice, integer, is_integer, number
+from tatl_mj.validation import (
+    Array,
+    Constraints,
+    Function,
+    Interval,
+    InvalidSetting,
+    ListOf,
+    Options,
+    Text,
+    check_settings,
+)
 
 TargetModel = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """One batched target step: (N, dT) states, (N, mT) action values -> (N, dT) next states."""
@@ -165,79 +175,57 @@ class HorizonTATLPolicy:
     samples_used: int | None = None
     admissible: np.ndarray | None = None
 
+    constraints: ClassVar[Constraints] = {
+        "model": [Function("(states (N, d), action values (N, m)) -> (N, d)")],
+        "target_low": [Array(1, finite=False)],
+        "target_high": [Array(1, finite=False)],
+        "horizon": [Interval(int, 1, unit=" (target steps)")],
+        "step_ratio": [Interval(float, 0, closed="right", unit=" (dt_source / dt_target)")],
+        "weights": [None, Array(1, low=0, not_all_zero=True)],
+        "reference": [Options(*REFERENCES)],
+        "source_step": [None, Function("(states (N, dS), action indices (N,)) -> (N, dS)")],
+        "target_actions": [None, Array(2)],
+        "periodic": [None, Periodic()],
+        "source_zero": [ListOf(Interval(int, 0))],
+        "delta": [None, Array(1, low=0, low_open=True)],
+        "admissible": [None, Array(2)],
+    }
+
     def __post_init__(self) -> None:
-        if not callable(self.model):
-            raise ValueError("model must be callable (states (N, d), action values (N, m)) -> (N, d)")
-        low = np.atleast_1d(np.asarray(self.target_low, dtype=np.float64)).ravel()
-        high = np.atleast_1d(np.asarray(self.target_high, dtype=np.float64)).ravel()
-        if (
-            low.size == 0
-            or low.shape != high.shape
-            or np.any(np.isnan(low))
-            or np.any(np.isnan(high))
-            or np.any(low > high)
-        ):
-            raise ValueError(
-                f"target_low must be <= target_high, one entry per action column each, "
-                f"got {self.target_low!r} and {self.target_high!r}"
-            )
+        check_settings(self)
+        owner, low, high = type(self).__name__, self.target_low, self.target_high
         m = low.size
-        object.__setattr__(self, "target_low", low)
-        object.__setattr__(self, "target_high", high)
-        owner = type(self).__name__
-        integer(owner, "horizon", self.horizon, 1, unit=" (target steps)")
-        ratio = number(owner, "step_ratio", self.step_ratio, 0.0, low_open=True, unit=" (dt_source / dt_target)")
-        object.__setattr__(self, "step_ratio", ratio)
-        if self.weights is not None:
-            w = np.asarray(self.weights, dtype=np.float64)
-            if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
-                raise ValueError(
-                    f"weights must be a (d,) vector of finite numbers >= 0, not all 0, got {self.weights!r}"
-                )
-            object.__setattr__(self, "weights", w)
-        choice(owner, "reference", self.reference, REFERENCES)
+        if high.shape != low.shape or np.any(low > high):
+            raise InvalidSetting(
+                f"{owner}.target_low must be <= target_high, one entry per action column each, got {low} and {high}"
+            )
         if self.reference == "source":
             missing = [n for n in ("source_q", "mapping", "source_step", "target_actions") if getattr(self, n) is None]
             if missing:
-                raise ValueError(f"reference='source' needs {', '.join(missing)} (or use reference='zero')")
-            if not callable(self.source_step):
-                raise ValueError("source_step must be callable (states (N, dS), action indices (N,)) -> (N, dS)")
-            actions = np.asarray(self.target_actions, dtype=np.float64)
-            actions = actions[:, None] if actions.ndim == 1 else actions
-            if actions.ndim != 2 or actions.shape[1] != m or not np.all(np.isfinite(actions)):
-                raise ValueError(
-                    f"target_actions must be a finite (n, {m}) array, got shape {np.shape(self.target_actions)}"
+                raise InvalidSetting(
+                    f"{owner}: reference='source' needs {', '.join(missing)} (or use reference='zero')"
                 )
-            if self.source_q.n_actions != len(actions):
-                raise ValueError(
-                    f"source_q has {self.source_q.n_actions} actions, target_actions has {len(actions)} (Assumption 1)"
+            if self.source_q.n_actions != len(self.target_actions):
+                raise InvalidSetting(
+                    f"{owner}: source_q has {self.source_q.n_actions} actions, target_actions has "
+                    f"{len(self.target_actions)} (Assumption 1)"
                 )
-            object.__setattr__(self, "target_actions", actions)
-        zero = tuple(self.source_zero)
-        if zero and (self.reference != "source" or not all(is_integer(i) and i >= 0 for i in zero)):
-            raise ValueError(
-                f"source_zero must be source coordinate indices >= 0 with reference='source', got {zero!r}"
-            )
-        object.__setattr__(self, "source_zero", tuple(int(i) for i in zero))
-        object.__setattr__(self, "periodic", periodic_mask(self.periodic, None, "periodic"))
-        if self.delta is None:
-            span = high - low
-            delta = np.where(np.isfinite(span) & (span > 0), 0.1 * span, 1.0)
-        else:
-            delta = np.asarray(self.delta, dtype=np.float64)
-            if delta.size not in (1, m) or not np.all(np.isfinite(delta)) or np.any(delta <= 0):
-                raise ValueError(f"delta must be finite numbers > 0, one or {m} of them, got {self.delta!r}")
-            delta = np.broadcast_to(delta.ravel(), (m,)).copy()
-        object.__setattr__(self, "delta", delta)
-        if self.admissible is not None:
-            admissible = np.asarray(self.admissible, dtype=np.float64)
-            admissible = admissible[:, None] if admissible.ndim == 1 else admissible
-            if admissible.ndim != 2 or admissible.shape[1] != m or len(admissible) == 0:
-                raise ValueError(f"admissible must be an (n_ad, {m}) array, got shape {np.shape(self.admissible)}")
-            object.__setattr__(self, "admissible", admissible)
+        elif self.source_zero:
+            raise InvalidSetting(f"{owner}.source_zero must be empty with reference='zero', got {self.source_zero}")
+        for field in ("target_actions", "admissible"):
+            value = getattr(self, field)
+            if value is not None and value.shape[1] != m:
+                raise InvalidSetting(
+                    f"{owner}.{field} must have {m} columns (one per action column), got {value.shape}"
+                )
+        if self.delta is not None and self.delta.size not in (1, m):
+            raise InvalidSetting(f"{owner}.delta must have one or {m} entries, got {self.delta.size}")
+        span = high - low
+        delta = np.where(np.isfinite(span) & (span > 0), 0.1 * span, 1.0) if self.delta is None else self.delta
+        object.__setattr__(self, "delta", np.broadcast_to(delta.ravel(), (m,)).copy())  # one probe per column
         if self.affine is not None:
             if self.periodic is not None:
-                raise ValueError("affine (closed-form responses) cannot be used with periodic coordinates")
+                raise InvalidSetting(f"{owner}.affine (closed-form responses) cannot be used with periodic coordinates")
             object.__setattr__(self, "_closed_form", _closed_form(self.affine, self.horizon, m))
 
     @property
@@ -510,26 +498,24 @@ class HorizonTATL(TATL):
     model: str = "apprentice"
     name: str = "ta-tl-h"
 
-    MODELS = ("apprentice", "oracle")
+    constraints: ClassVar[Constraints] = {
+        **TATL.constraints,
+        "horizon": [Interval(int, 1, unit=" (target steps)")],
+        "step_ratio": [None, Interval(float, 0, closed="right", unit=" (dt_source / dt_target)")],
+        "weights": [ListOf(Interval(float, 0), not_all_zero=True)],
+        "reference": [Options(*REFERENCES)],
+        "source_zero": [ListOf(Text("a source state name"))],
+        "model": [Options("apprentice", "oracle")],
+    }
 
     def __post_init__(self) -> None:
         super().__post_init__()
         owner = type(self).__name__
         if self.adaptive_actions:
-            raise ValueError(f"{owner}.adaptive_actions is not supported (the action is clipped to the actuator)")
-        integer(owner, "horizon", self.horizon, 1, unit=" (target steps)")
-        if self.step_ratio is not None:
-            number(owner, "step_ratio", self.step_ratio, 0.0, low_open=True, unit=" (dt_source / dt_target)")
-        w = np.asarray(self.weights, dtype=np.float64) if self.weights else None
-        if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0)):
-            raise ValueError(f"{owner}.weights must be numbers >= 0, not all 0, got {self.weights!r}")
-        choice(owner, "reference", self.reference, REFERENCES)
-        choice(owner, "model", self.model, self.MODELS)
-        if not isinstance(self.source_zero, tuple) or not all(isinstance(n, str) for n in self.source_zero):
-            raise ValueError(f"{owner}.source_zero must be source state names, got {self.source_zero!r}")
+            raise InvalidSetting(f"{owner}.adaptive_actions is not supported (the action is clipped to the actuator)")
         for field, used in (("source_zero", bool(self.source_zero)), ("source = 'placebo'", self.source == "placebo")):
             if used and self.reference != "source":
-                raise ValueError(f"{owner}.{field} needs reference = 'source' (the zero reference has no source)")
+                raise InvalidSetting(f"{owner}.{field} needs reference = 'source' (the zero reference has no source)")
 
     @property
     def uses_samples(self) -> bool:

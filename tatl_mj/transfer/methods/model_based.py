@@ -14,17 +14,19 @@ as every method's are.
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import numpy as np
 
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice
+from tatl_mj.transfer.features import FeaturesSpec, check_features
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.method import TransferProblem, check_features
+from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.methods.target_fqi import TargetFQI
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import integer, number
+from tatl_mj.validation import Constraints, Interval, InvalidSetting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,19 +45,19 @@ class ApprenticeFQI(TargetFQI):
     model_samples: int = 20000
     name: str = "apprentice-fqi"
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        owner = type(self).__name__
-        check_features(owner, "apprentice", self.apprentice)
-        number(owner, "apprentice_ridge", self.apprentice_ridge, 0.0)
-        integer(owner, "model_samples", self.model_samples, 1)
+    constraints: ClassVar[Constraints] = {
+        **TargetFQI.constraints,
+        "apprentice": [FeaturesSpec()],
+        "apprentice_ridge": [Interval(float, 0)],
+        "model_samples": [Interval(int, 1)],
+    }
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)
         owner = type(self).__name__
         check_features(owner, "apprentice", self.apprentice, target.state_dim)
         if target.reset_low is None and not (target.discrete and target.known_model):
-            raise ValueError(f"{owner} needs the target's reset box; {target.domain}/{target.task} declares none")
+            raise InvalidSetting(f"{owner} needs the target's reset box; {target.domain}/{target.task} declares none")
 
     def fit_apprentice(self, problem: TransferProblem, data: Transitions) -> Apprentice:
         """``ta-tl``'s apprentice fitted on every sample of ``data`` (no Algorithm 2: it needs the source)."""

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transitions import Transitions
+from tatl_mj.validation import Constraints
 
 
 @dataclasses.dataclass(frozen=True)
@@ -14,6 +16,7 @@ class ProjectedSource:
 
     name: str = "projected-source"
     uses_samples = False  # evaluated once, whatever the budget
+    constraints: ClassVar[Constraints] = {}  # no settings
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy:
         return problem.projected_source_policy()

@@ -12,13 +12,14 @@ failure is the rule's and how much the apprentice's.
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import numpy as np
 
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import as_states
-from tatl_mj.transfer.fqi import QFunction, TabularQ
+from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.tabular import (
     PRIOR_SCOPES,
@@ -28,9 +29,10 @@ from tatl_mj.transfer.tabular import (
     mapped_model,
     uninformed_model,
 )
+from tatl_mj.transfer.tabular_q import TabularQ
 from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import choice, number
+from tatl_mj.validation import Boolean, Constraints, Interval, Options, check_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,15 +194,15 @@ class ReplanTATL:
     data: str = "stream"
     name: str = "ta-tl-replan"
 
-    DATA = ("stream", "source-policy")
+    constraints: ClassVar[Constraints] = {
+        "gamma": [Interval(float, 0, 1, closed="left")],
+        "source_prior": [Boolean()],
+        "prior_scope": [Options(*PRIOR_SCOPES)],
+        "data": [Options("stream", "source-policy")],
+    }
 
     def __post_init__(self) -> None:
-        owner = type(self).__name__
-        number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
-        if not isinstance(self.source_prior, bool):
-            raise ValueError(f"{owner}.source_prior must be true or false, got {self.source_prior!r}")
-        choice(owner, "prior_scope", self.prior_scope, PRIOR_SCOPES)
-        choice(owner, "data", self.data, self.DATA)
+        check_settings(self)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         owner = type(self).__name__
@@ -240,6 +242,7 @@ class OneStepOracle:
 
     name: str = "ta-tl-oracle"
     uses_samples = False
+    constraints: ClassVar[Constraints] = {}  # no settings
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         if target.known_model is None:

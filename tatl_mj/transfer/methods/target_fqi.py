@@ -14,16 +14,18 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from typing import ClassVar
 
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.features import FeaturesSpec, check_features
 from tatl_mj.transfer.fqi import PRECISIONS, REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
-from tatl_mj.transfer.method import Policy, TransferProblem, check_features
+from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import choice, integer, number
+from tatl_mj.validation import Constraints, Interval, InvalidSetting, Options, check_settings
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -106,30 +108,35 @@ class TargetFQI:
     name: str = "target-fqi"
     source_use = "none"  # how the mapped source Q enters: "none", "initial" (Q_0) or "prior" (every fit)
 
+    constraints: ClassVar[Constraints] = {
+        "features": [None, FeaturesSpec()],
+        "regressor": [Options(*REGRESSOR_KINDS)],
+        "ridge": [None, Interval(float, 0)],
+        "precision": [None, Options(*PRECISIONS)],
+        "n_estimators": [None, Interval(int, 1)],
+        "gamma": [Interval(float, 0, 1, closed="left")],
+        "iterations": [Interval(int, 1)],
+        "data": [Options(*DATA_PROTOCOLS)],
+        "epsilon": [Interval(float, 0, 1)],
+        "online_batch": [Interval(int, 1)],
+        "source": [Options(*SOURCES)],
+    }
+
     def __post_init__(self) -> None:
+        check_settings(self)
         owner = type(self).__name__
-        choice(owner, "regressor", self.regressor, REGRESSOR_KINDS)
-        for field in ("ridge", "precision", "features"):
-            if getattr(self, field) is not None and self.regressor != "linear":
-                raise ValueError(f"{owner}.{field} applies to regressor 'linear' only, not {self.regressor!r}")
-        if self.n_estimators is not None:
-            if self.regressor != "extra_trees":
-                raise ValueError(f"{owner}.n_estimators applies to regressor 'extra_trees' only")
-            integer(owner, "n_estimators", self.n_estimators, 1)
-        if self.ridge is not None:
-            number(owner, "ridge", self.ridge, 0.0)
-        if self.precision is not None:
-            choice(owner, "precision", self.precision, PRECISIONS)
-        if self.regressor == "linear":
-            check_features(owner, "features", self.linear_features)
-        number(owner, "gamma", self.gamma, 0.0, 1.0, high_open=True)
-        integer(owner, "iterations", self.iterations, 1)
-        choice(owner, "data", self.data, DATA_PROTOCOLS)
-        number(owner, "epsilon", self.epsilon, 0.0, 1.0)
-        integer(owner, "online_batch", self.online_batch, 1)
-        choice(owner, "source", self.source, SOURCES)
+        for field, regressor in (
+            ("ridge", "linear"),
+            ("precision", "linear"),
+            ("features", "linear"),
+            ("n_estimators", "extra_trees"),
+        ):
+            if getattr(self, field) is not None and self.regressor != regressor:
+                raise InvalidSetting(f"{owner}.{field} applies to regressor {regressor!r} only, not {self.regressor!r}")
         if self.source == "placebo" and self.source_use == "none":
-            raise ValueError(f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none")
+            raise InvalidSetting(
+                f"{owner}.source = 'placebo' needs a learner that uses the source Q; {owner} uses none"
+            )
 
     @property
     def uses_source(self) -> bool:
@@ -144,7 +151,7 @@ class TargetFQI:
         if self.regressor == "linear":
             check_features(type(self).__name__, "features", self.linear_features, target.state_dim)
         if self.data == "reset" and target.reset_low is None and not (target.discrete and target.known_model):
-            raise ValueError(
+            raise InvalidSetting(
                 f"{type(self).__name__}.data = 'reset' needs a reset box; {target.domain}/{target.task} declares none"
             )
 

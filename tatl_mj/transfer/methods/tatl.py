@@ -9,17 +9,18 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import ClassVar
 
 import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
-from tatl_mj.transfer.features import Features, make_features
-from tatl_mj.transfer.method import Policy, TransferProblem, check_features
+from tatl_mj.transfer.features import Features, FeaturesSpec, check_features, make_features
+from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
 from tatl_mj.transitions import Transitions
-from tatl_mj.validation import choice, integer, number
+from tatl_mj.validation import Constraints, Interval, InvalidSetting, ListOf, Options, check_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +36,9 @@ class TATL:
       gap: ``"absolute"``, the paper's one-sided U_M - U_Mhat <= zeta (in return
         units), or ``"relative"``, |U_M - U_Mhat| / |U_M| <= zeta.
       batch: Algorithm 2's sample increment (None: all samples at once).
+      utility_episodes: Algorithm 2's k trials: how many episodes of the projected
+        source policy U_M (real target, counted against the method) and U_Mhat (the
+        apprentice) average over; None: the experiment's evaluation protocol's.
       actions: ``"discrete"``: the action is snapped to the target's discrete
         action set, the one the FQI baselines choose from, so every method is
         compared within the same actions; ``"continuous"``: any value within the
@@ -50,33 +54,32 @@ class TATL:
     zeta: float | None = 0.1
     gap: str = "absolute"
     batch: int | None = None
+    utility_episodes: int | None = None
     actions: str = "discrete"
     adaptive_actions: tuple[float, ...] = ()
     source: str = "trained"
     name: str = "ta-tl"
 
-    GAPS = ("absolute", "relative")
-    ACTION_SETS = ("discrete", "continuous")
+    constraints: ClassVar[Constraints] = {
+        "apprentice": [FeaturesSpec()],
+        "ridge": [Interval(float, 0)],
+        "zeta": [None, Interval(float, 0, closed="right")],
+        "gap": [Options("absolute", "relative")],
+        "batch": [None, Interval(int, 1)],
+        "utility_episodes": [None, Interval(int, 1)],
+        "actions": [Options("discrete", "continuous")],
+        "adaptive_actions": [ListOf(Interval(float))],
+        "source": [Options(*SOURCES)],
+    }
 
     def __post_init__(self) -> None:
-        owner = type(self).__name__
-        check_features(owner, "apprentice", self.apprentice)
-        choice(owner, "gap", self.gap, self.GAPS)
-        choice(owner, "actions", self.actions, self.ACTION_SETS)
-        choice(owner, "source", self.source, SOURCES)
-        number(owner, "ridge", self.ridge, 0.0)
-        if self.zeta is not None:
-            number(owner, "zeta", self.zeta, 0.0, low_open=True)
-        if self.batch is not None:
-            integer(owner, "batch", self.batch, 1)
-        for i, value in enumerate(self.adaptive_actions):
-            number(owner, f"adaptive_actions[{i}]", value)
+        check_settings(self)
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         """Settings that need the tasks' descriptions (basis size, actuator)."""
         check_features(type(self).__name__, "apprentice", self.apprentice, target.state_dim)
         if self.adaptive_actions and target.discrete:
-            raise ValueError(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
+            raise InvalidSetting(f"{type(self).__name__}.adaptive_actions apply to a continuous actuator only")
 
     def features(self, target: TaskDescription) -> Features:
         return make_features(self.apprentice, target.state_dim)
@@ -101,19 +104,24 @@ class TATL:
             target_samples,
             actions,
             self.features(target),
-            functools.partial(problem.utility_gap, kind=self.gap),
+            functools.partial(problem.utility_gap, kind=self.gap, episodes=self.utility_episodes),
             self.zeta,
             self.batch or len(target_samples),
             self.ridge,
             periodic=periodic,
             gaps=self._known_gaps(problem, target_samples),
             # Sizes ahead of need are rolled out only where that costs about one rollout.
-            utility_gaps=functools.partial(problem.utility_gaps, kind=self.gap) if problem.model_returns else None,
+            utility_gaps=(
+                functools.partial(problem.utility_gaps, kind=self.gap, episodes=self.utility_episodes)
+                if problem.model_returns
+                else None
+            ),
         )
         # Every budget's Algorithm 2 uses U_M, even one whose gaps were all known:
         # the problem counts its real-target rollouts against this budget.
         assert problem.target_return is not None
-        problem.target_return(problem.projected_source_policy())
+        more = {} if self.utility_episodes is None else {"episodes": self.utility_episodes}
+        problem.target_return(problem.projected_source_policy(), **more)
         return learned
 
     def _known_gaps(self, problem: TransferProblem, target_samples: Transitions) -> dict[int, float]:

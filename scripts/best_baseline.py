@@ -1,0 +1,22 @@
+"""Each experiment's best baseline per verdict question, from a run on the tuning seeds, as the
+``best_baseline`` line its spec freezes (``verdicts.choose_best_baseline``: the baseline with
+the highest IQM of the question's per-seed statistic; ties to the one listed first).
+
+    tatl run tasks/*.toml tasks/variants/*.toml --preset paper --seeds 5 --first-seed 0 --out runs/tuning
+    python scripts/best_baseline.py runs/tuning/summary.json
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from tatl_mj.experiments import verdicts
+from tatl_mj.transfer import roles
+
+if __name__ == "__main__":
+    summary = json.load(open(sys.argv[1], encoding="utf-8"))
+    for name, experiment in summary["experiments"].items():
+        chosen = verdicts.choose_best_baseline(experiment, roles.BASELINES)
+        table = ", ".join(f'{q} = "{b}"' for q, b in chosen.items())
+        print(f"{name}: best_baseline = {{ {table} }}")

@@ -1,0 +1,140 @@
+"""The sweeps' credit maps: where along a target condition transfer is credited (``tatl plot``
+draws one per ``[sweep]`` spec; ``tables.credit_table`` is its table)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tatl_mj.experiments import verdicts
+from tatl_mj.experiments.figures import LINE_STYLES, axis_limits, mark_clipped
+from tatl_mj.experiments.style import method_colors, order
+from tatl_mj.experiments.summary import REFERENCE_THRESHOLD
+
+
+def sweeps(summary: dict) -> dict[str, list[tuple[dict, dict]]]:
+    """Sweep name -> its conditions in run order, each as (swept values, experiment)."""
+    out: dict[str, list[tuple[dict, dict]]] = {}
+    for exp in summary["experiments"].values():
+        spec = exp.get("spec") or {}
+        if spec.get("condition"):
+            out.setdefault(spec.get("streams") or spec["name"], []).append((spec["condition"], exp))
+    return out
+
+
+def _credit_pairs(exp: dict) -> list[dict]:
+    """The experiment's pairs that credit transfer: against the ablation and the placebo."""
+    return [v for v in exp.get("verdicts", []) if v["role"] in (verdicts.ABLATION, verdicts.PLACEBO)]
+
+
+def _heat_map(
+    fig: Any,
+    ax: Any,
+    cells: list[tuple[dict, dict]],
+    params: list[str],
+    estimate_of: Callable[[dict], tuple[float, float, float] | None],
+    cmap: str,
+    limits: tuple[float | None, float | None],
+) -> None:
+    """One estimate per condition of a two-parameter sweep: colour by its value, its
+    interval written in the cell."""
+    first, second = ([c[k] for c, _ in cells] for k in params)
+    rows, cols = sorted(set(first), key=first.index), sorted(set(second), key=second.index)
+    grid = np.full((len(rows), len(cols)), np.nan)
+    text = {}
+    for condition, exp in cells:
+        r, c = rows.index(condition[params[0]]), cols.index(condition[params[1]])
+        found = estimate_of(exp)
+        if found is not None and not np.isnan(found[0]):
+            grid[r, c] = found[0]
+            text[r, c] = f"{found[0]:.2f}\n[{found[1]:.2f}, {found[2]:.2f}]"
+    image = ax.imshow(grid, cmap=cmap, vmin=limits[0], vmax=limits[1], aspect="auto")
+    for (r, c), value in np.ndenumerate(grid):
+        # White on the darkest colours, black elsewhere, so every cell stays readable.
+        shade = image.cmap(image.norm(value)) if np.isfinite(value) else (1.0, 1.0, 1.0, 1.0)
+        colour = "white" if 0.299 * shade[0] + 0.587 * shade[1] + 0.114 * shade[2] < 0.45 else "black"
+        ax.text(c, r, text.get((r, c), "n/a"), ha="center", va="center", fontsize=8, color=colour)
+    ax.set_xticks(range(len(cols)), [str(v) for v in cols])
+    ax.set_yticks(range(len(rows)), [str(v) for v in rows])
+    ax.set_xlabel(params[1])
+    ax.set_ylabel(params[0])
+    fig.colorbar(image, ax=ax)
+
+
+def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> Path:
+    """For one sweep: (left) P(method > its ablation or placebo) with its 95% interval over the
+    swept parameter (curves; a heat map of the first pair for two parameters); (right) each
+    method's normalised final IQM with its band (curves; the first transfer method's for two)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    params = list(cells[0][0])
+    fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4))
+    pairs = sorted({(p["role"], p["method"], p["other"]) for _, exp in cells for p in _credit_pairs(exp)})
+    methods = sorted({m for _, exp in cells for m, d in exp["methods"].items() if "final_iqm" in d}, key=order)
+    colors = method_colors(methods)
+
+    def estimate(exp: dict, key: tuple, question: str = verdicts.EFFICIENCY) -> tuple[float, float, float]:
+        pair = next((p for p in _credit_pairs(exp) if (p["role"], p["method"], p["other"]) == key), None)
+        e = ((pair or {}).get(question) or {}).get("probability") or {}
+        value = np.nan if e.get("value") is None else e["value"]
+        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+
+    def final(exp: dict, method: str) -> tuple[float, float, float]:
+        e = exp["methods"].get(method, {}).get("final_iqm") or {}
+        value = np.nan if e.get("value") is None else e["value"]
+        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+
+    if len(params) == 1:
+        x = np.arange(len(cells))
+        for i, key in enumerate(pairs):
+            color = colors.get(key[1], "black")
+            for question, marker, shift in ((verdicts.FINAL, "o", -0.04), (verdicts.EFFICIENCY, "s", 0.04)):
+                v, lo, hi = np.array([estimate(exp, key, question) for _, exp in cells]).T
+                ax_p.errorbar(x + 0.1 * (i - len(pairs) / 2) + shift, v, yerr=[v - lo, hi - v], marker=marker,
+                              capsize=3, ls=LINE_STYLES[i % len(LINE_STYLES)], color=color,
+                              label=f"{key[1]} > {key[2]} ({question})")  # fmt: skip
+        finals = {method: np.array([final(exp, method) for _, exp in cells]).T for method in methods}
+        # A baseline's blow-up (scores are unbounded below) must not flatten the others: it is clipped, marked.
+        limits = axis_limits([v for f in finals.values() for v in f[0]], keep=(0.0, REFERENCE_THRESHOLD))
+        for i, method in enumerate(methods):
+            v, lo, hi = finals[method]
+            ax_s.plot(x, np.clip(v, *limits), marker="o", color=colors[method], ls=LINE_STYLES[i % len(LINE_STYLES)],
+                      label=method)  # fmt: skip
+            ax_s.fill_between(x, np.clip(lo, *limits), np.clip(hi, *limits), color=colors[method], alpha=0.15, lw=0)
+            mark_clipped(ax_s, x, v, limits, colors[method])
+        ax_s.set_ylim(*limits)
+        labels = [str(c[params[0]]) for c, _ in cells]
+        for ax in (ax_p, ax_s):
+            ax.set_xticks(x, labels)
+            ax.set_xlabel(params[0])
+            ax.grid(alpha=0.25)
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=7, frameon=False)
+        ax_p.axhline(0.5, color="black", ls="--", lw=0.9)
+        ax_p.set_ylim(-0.02, 1.02)
+        ax_s.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
+    else:
+        focus_method = pairs[0][1] if pairs else (methods[0] if methods else "")
+        _heat_map(fig, ax_p, cells, params, lambda exp: estimate(exp, pairs[0]) if pairs else None, "RdBu", (0, 1))
+        _heat_map(fig, ax_s, cells, params, lambda exp: final(exp, focus_method), "viridis", (None, None))
+    pair_text = f"{pairs[0][1]} > {pairs[0][2]}" if pairs and len(params) == 2 else "method > its ablation or placebo"
+    on = "efficiency" if len(params) == 2 else "final (circles), efficiency (squares)"
+    ax_p.set_title(f"(a) paired P({pair_text}) on a seed, {on}, 95% CI", fontsize=10)
+    focus = f" of {pairs[0][1] if pairs else methods[0]}" if methods and len(params) == 2 else ""
+    spread = "95% CI" if len(params) == 2 else "95% band"
+    ax_s.set_title(f"(b) normalised final score{focus}: IQM over seeds, {spread}", fontsize=10)
+    fig.suptitle(f"Where transfer is credited: {name}", fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["credit_map", "sweeps"]
