@@ -1,4 +1,4 @@
-"""The `tatl` command: list, run, plot, render, bench.
+"""The `tatl` command: list, run, plot, compare, reference, export, render, bench.
 
 No GL library is loaded until a frame is drawn (``tatl_mj.gl``); `render` and
 `bench` check the backend first, so every subcommand works on a headless machine.
@@ -7,8 +7,10 @@ No GL library is loaded until a frame is drawn (``tatl_mj.gl``); `render` and
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -113,36 +115,53 @@ def _checked_run(args: argparse.Namespace) -> tuple[list, range, dict | None] | 
     return specs, seeds, methods
 
 
+@contextlib.contextmanager
+def _stop_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM stop the workers and raise :class:`Interrupted` within the block."""
+    import signal
+
+    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _stopped(command: str, stop: Interrupted, out: str) -> int:
+    import signal
+
+    name = signal.Signals(stop.signum).name
+    # Leading newline: the progress bar's line is left unfinished.
+    print(
+        f"\ntatl {command}: stopped by {name}; finished units are kept in {out}, run the same command to resume",
+        file=sys.stderr,
+    )
+    return 128 + stop.signum
+
+
 def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict | None) -> tuple[dict, Any] | int:
     """Runs the checked specs with SIGINT and SIGTERM caught: (summary, the RunFailed or None),
     or the exit status of a run that stopped or could not start (its message printed)."""
-    import signal
-
     from tatl_mj.experiments import lock, records, runner
 
-    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
     failed: runner.RunFailed | None = None
     try:
-        summary = runner.run(
-            specs,
-            args.preset,
-            seeds,
-            args.out,
-            workers=args.workers,
-            executor=args.executor,
-            address=args.address,
-            methods=methods,
-        )
+        with _stop_signals():
+            summary = runner.run(
+                specs,
+                args.preset,
+                seeds,
+                args.out,
+                workers=args.workers,
+                executor=args.executor,
+                address=args.address,
+                methods=methods,
+            )
     except runner.RunFailed as error:  # every other unit finished and the summary was written
         failed, summary = error, error.summary
     except Interrupted as stop:
-        name = signal.Signals(stop.signum).name
-        # Leading newline: the progress bar's line is left unfinished.
-        print(
-            f"\ntatl run: stopped by {name}; finished units are kept in {args.out}, run the same command to resume",
-            file=sys.stderr,
-        )
-        return 128 + stop.signum
+        return _stopped("run", stop, args.out)
     except runner.ExecutorError as error:  # raised before any work starts
         print(f"tatl run: {error}", file=sys.stderr)
         return 2
@@ -159,9 +178,6 @@ def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict 
         where = error.filename or args.out
         print(f"tatl run: cannot write {where}: {error.strerror or error}", file=sys.stderr)
         return 2
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     return summary, failed
 
 
@@ -171,8 +187,14 @@ def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
 
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(runner.format_timings(runner.timings(args.out)))
-    physics = runner.physics_report(args.out)
-    records.write_json(Path(args.out) / "physics.json", physics)
+    path = Path(args.out) / "physics.json"
+    try:
+        previous = records.read_json(path)  # reused as it is where no unit ran since
+    except (FileNotFoundError, records.RecordError):
+        previous = None
+    physics = runner.physics_report(args.out, previous=previous if isinstance(previous, dict) else None)
+    if physics is not previous:
+        records.write_json(path, physics)
     print(runner.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
     from tatl_mj.experiments import summary as summary_mod
@@ -246,6 +268,130 @@ def _plot(args: argparse.Namespace) -> int:
         return 2
     for path in paths:
         print(f"wrote {path}")
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    """``tatl compare``: checks everything first (one line and exit 2 if it cannot run), then runs
+    the user's units and writes the tables, or with ``--check`` reruns one reference unit."""
+    from tatl_mj.experiments import compare, records, reference, runner
+    from tatl_mj.experiments import spec as spec_mod
+
+    try:
+        ref = reference.load(args.reference)
+        specs = [spec_mod.load_spec(p) for p in args.specs]
+        seeds = _compare_seeds(args, list(ref.manifest.seeds))
+        if args.check is None and (not args.methods or not args.out):
+            raise compare.CompareError("--methods and --out are needed: your methods (module:Class) and a folder")
+        if args.check is None and (problem := _check_out(args.out)):
+            raise compare.CompareError(problem)
+        entries = [] if args.check is not None else [e.strip() for e in args.methods.split(",") if e.strip()]
+        renamed = dict(_pair("methods", e) for e in entries if "=" in e)  # a built-in under a new name
+        rest = [e for e in entries if "=" not in e]
+        try:
+            methods = _methods(",".join(rest)) or {} if rest else {}
+        except ValueError as error:
+            raise compare.CompareError(f"--methods: {error}") from None
+        pairs = {kind: [_pair(kind, text) for text in getattr(args, kind) or ()] for kind in compare.PAIR_KINDS}
+        plan = compare.plan(ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds)
+        unit = _unit(args.check) if args.check else None
+    except (ValueError, FileNotFoundError) as error:  # CompareError, ReferenceError, SpecError, a plug-in's
+        print(f"tatl compare: {error}", file=sys.stderr)
+        return 2
+    pin = _pin(ref)
+    try:
+        with _stop_signals():
+            if args.check is not None:
+                result = compare.check(plan, unit, pin)
+                print(result)
+                return 0 if result.reproduced else 1
+            outcome = compare.run(plan, args.out, workers=args.workers, pin=pin)
+    except Interrupted as stop:
+        return _stopped("compare", stop, args.out or "its folder")
+    except runner.RunFailed as error:
+        print(f"tatl compare: {error}", file=sys.stderr)
+        return 1
+    except (records.RecordError, compare.CompareError) as error:
+        print(f"tatl compare: {error}", file=sys.stderr)
+        return 2
+    for path in outcome.paths:
+        print(f"wrote {path}")
+    if outcome.kernels_note:
+        print(outcome.kernels_note)
+    return 0
+
+
+def _pin(ref: Any) -> Any:
+    """The reference's kernels for the user's units, where it names one set and this machine can."""
+    from tatl_mj.experiments import kernels
+
+    labels = sorted(ref.manifest.kernels)
+    if len(labels) != 1:
+        return kernels.Pin(env={}, kernels="", why_not=f"its records come from {len(labels)} sets of kernels")
+    return kernels.pin_to(labels[0])
+
+
+def _compare_seeds(args: argparse.Namespace, theirs: list[int]) -> list[int] | None:
+    """The seeds --seeds and --first-seed ask for (the reference's where one is left out), or None."""
+    if args.seeds is None and args.first_seed is None:
+        return None
+    first = theirs[0] if args.first_seed is None else args.first_seed
+    return list(range(first, first + (len(theirs) if args.seeds is None else args.seeds)))
+
+
+PAIR_FORMS = {
+    "ablation": "YOURS=ABLATION, e.g. mine=mine-no-source",
+    "placebo": "YOURS=PLACEBO, e.g. mine=mine-placebo",
+    "methods": "NEW=BUILTIN, e.g. ta-tl-copy=ta-tl",
+}
+
+
+def _pair(option: str, text: str) -> tuple[str, str]:
+    """``A=B`` given to ``--OPTION`` as (A, B); ValueError naming the form it takes."""
+    left, _, right = text.partition("=")
+    if not left.strip() or not right.strip():
+        raise ValueError(f"--{option} {text}: expected {PAIR_FORMS[option]}")
+    return left.strip(), right.strip()
+
+
+def _unit(text: str) -> tuple[str, int, str]:
+    experiment, seed, method = (text.split("/") + ["", "", ""])[:3]
+    if not experiment or not seed.startswith("seed") or not seed[4:].isdigit() or not method:
+        raise ValueError(f"--check {text}: expected EXPERIMENT/seedN/METHOD, e.g. mc_to_ip/seed100/rl")
+    return experiment, int(seed[4:]), method
+
+
+def _reference(args: argparse.Namespace) -> int:
+    from tatl_mj.experiments import records, reference
+
+    root = Path(args.root) if args.root else reference.REFERENCE_ROOT
+    try:
+        if args.action == "list":
+            for name in reference.available(root):
+                manifest = reference.load(name, root).manifest
+                print(f"{name}: preset {manifest.preset}, seeds {list(manifest.seeds)}, {manifest.records:,} records")
+            return 0
+        if args.action == "build":
+            built = reference.build(args.run_dir, args.name, args.command, root)
+            print(f"wrote {built.folder} ({built.manifest.records:,} records)")
+            return 0
+        reference.unpack(reference.load(args.name, root), args.out)
+    except (reference.ReferenceError, records.RecordError) as error:
+        print(f"tatl reference: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out}; `tatl plot {args.out}` draws its tables and figures")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from tatl_mj.experiments import export, records
+
+    try:
+        path = export.export(args.dir, args.out, args.format)
+    except (export.ExportError, records.RecordError) as error:
+        print(f"tatl export: {error}", file=sys.stderr)
+        return 2
+    print(f"wrote {path}")
     return 0
 
 
@@ -347,6 +493,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help="a `tatl run` output folder (its --out)")
     p.set_defaults(func=_plot)
 
+    _compare_parser(sub)
+    _reference_parser(sub)
+
+    p = sub.add_parser("export", help="a run's records as one tidy table (CSV)")
+    p.add_argument("dir", help="a `tatl run` output folder (its --out)")
+    p.add_argument("--format", choices=("csv",), default="csv", help="csv (Parquet would need pyarrow or pandas)")
+    p.add_argument("--out", default=None, help="the table's path (default: DIR/export.csv)")
+    p.set_defaults(func=_export)
+
     p = sub.add_parser("render", help="render a clip of a method's policy on the target task")
     p.add_argument("spec", help="experiment spec, e.g. tasks/ip_to_flipped_ip.toml")
     p.add_argument("--method", default="ta-tl", help="a method the spec lists, or random (default: ta-tl)")
@@ -367,6 +522,58 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_arguments(p)
     p.set_defaults(func=_bench)
     return parser
+
+
+def _compare_parser(sub: Any) -> None:
+    p = sub.add_parser("compare", help="your methods against a reference set's, without rerunning it")
+    p.add_argument("specs", nargs="+", help="experiment specs the reference was made from, e.g. tasks/*.toml")
+    p.add_argument(
+        "--methods",
+        default=None,
+        help="your methods, comma-separated, as module:Class; NEW=BUILTIN runs a built-in under a new name",
+    )
+    p.add_argument("--out", type=_non_empty, default=None, help="output folder; rerunning resumes it")
+    p.add_argument(
+        "--reference",
+        default="paper-heldout",
+        help="a reference set's name (`tatl reference list`) or folder (default: paper-heldout; "
+        "tune on paper-tuning, seeds 0-4)",
+    )
+    for kind in ("ablation", "placebo"):
+        p.add_argument(
+            f"--{kind}",
+            action="append",
+            metavar=f"YOURS={kind.upper()}",
+            help=f"credit transfer: one of your methods and its {kind} (yours or the reference's); repeatable",
+        )
+    p.add_argument("--preset", default=None, help="must be the reference's (default: the reference's)")
+    p.add_argument("--seeds", type=_int_at_least(1), default=None, help="must be the reference's (default: theirs)")
+    p.add_argument("--first-seed", type=_int_at_least(0), default=None, help="must be the reference's (default)")
+    p.add_argument("--workers", type=_int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")
+    p.add_argument(
+        "--check",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="EXPERIMENT/seedN/METHOD",
+        help="rerun one reference unit (default: its cheapest) and report whether it is reproduced bit for bit",
+    )
+    p.set_defaults(func=_compare)
+
+
+def _reference_parser(sub: Any) -> None:
+    p = sub.add_parser("reference", help="build, list or unpack reference sets")
+    p.add_argument("--root", default=None, help="the folder of sets (default: the package's reference/)")
+    actions = p.add_subparsers(dest="action", required=True)
+    b = actions.add_parser("build", help="pack a finished run folder as a reference set")
+    b.add_argument("run_dir", help="a finished `tatl run` output folder")
+    b.add_argument("--name", required=True, help="the set's name, e.g. paper-heldout")
+    b.add_argument("--command", required=True, help="the `tatl run` command that made RUN_DIR, as typed")
+    actions.add_parser("list", help="the sets there, with their preset and seeds")
+    u = actions.add_parser("unpack", help="a set as a run folder that `tatl plot` reads")
+    u.add_argument("name", help="a set's name or folder")
+    u.add_argument("--out", type=_non_empty, required=True, help="a new folder")
+    p.set_defaults(func=_reference)
 
 
 RENDERING_COMMANDS = ("render", "bench")

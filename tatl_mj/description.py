@@ -68,6 +68,10 @@ class TaskDescription:
       falls: an episode that ends before its cap has failed (the bicycle or the
         cart-pole fell), so survival to the cap says how well a policy holds it;
         False where an early end is a success (the grid world's goal) or none occurs.
+      dynamics_version: the version of what the task computes (its physics, reward,
+        end condition, start states, noise), bumped whenever a change could move a
+        record; records and reference sets name it (docs/versions.md). Apart from
+        the Gymnasium ids' interface version, which an action dtype also bumps.
     """
 
     domain: str
@@ -90,8 +94,13 @@ class TaskDescription:
     gymnasium_peer: str | None = None
     steadiness: tuple[str, ...] = ()
     falls: bool = False
+    dynamics_version: int = 1
 
     def __post_init__(self) -> None:
+        if isinstance(self.dynamics_version, bool) or not isinstance(self.dynamics_version, int):
+            raise ValueError(f"TaskDescription.dynamics_version must be a whole number, got {self.dynamics_version!r}")
+        if self.dynamics_version < 1:
+            raise ValueError(f"TaskDescription.dynamics_version must be >= 1, got {self.dynamics_version}")
         d = len(self.state_names)
         unknown = [n for n in self.steadiness if n not in self.state_names]
         if unknown:

@@ -80,3 +80,83 @@ def drawn(monkeypatch) -> list:
         matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (figures.append(fig), save(fig, *a, **k))
     )
     return figures
+
+
+# A small experiment for reference sets: the flipped pendulum with five methods (TA-TL, its
+# placebo and ablation, two baselines) on two seeds, with a reference return above random.
+FEATURES = (
+    '{ kind = "rbf", centers = 25, low = [-3.14159, -8.0], high = [3.14159, 8.0], sigma = [1.2, 3.0], '
+    "periodic = [true, false] }"
+)
+TINY_REFERENCE_SPEC = """
+name = "tiny_flip"
+title = "A tiny flipped pendulum"
+paper_claim = "(test) none"
+best_baseline = { final = "uma-tl", efficiency = "uma-tl" }
+
+[source]
+domain = "pendulum"
+task = "swingup"
+data = { sampling = "uniform", state_low = [-3.14159, -8.0], state_high = [3.14159, 8.0] }
+
+[target]
+domain = "pendulum"
+task = "swingup_flipped"
+data = { sampling = "episodes", episode_steps = 40 }
+
+[source_learning]
+features = FEATURES
+gamma = 0.95
+iterations = 5
+
+[mapping]
+kind = "identity"
+
+[methods.ta-tl]
+apprentice = { kind = "linear", periodic = [true, false] }
+zeta = 0.1
+
+[methods.ta-tl-placebo]
+method = "ta-tl"
+apprentice = { kind = "linear", periodic = [true, false] }
+zeta = 0.1
+source = "placebo"
+
+[methods.apprentice-fqi]
+apprentice = { kind = "linear", periodic = [true, false] }
+features = FEATURES
+iterations = 5
+model_samples = 400
+
+[methods.uma-tl]
+features = FEATURES
+iterations = 5
+
+[methods.rl]
+features = FEATURES
+iterations = 5
+
+[presets.tiny]
+seeds = 2
+source_samples = 400
+alignment_samples = 40
+target_budgets = [40, 120]
+evaluation_episodes = 2
+evaluation_steps = 40
+reference_return = -200
+""".replace("FEATURES", FEATURES)
+
+
+@pytest.fixture(scope="session")
+def tiny_reference(tmp_path_factory):
+    """(spec path, run folder, reference set): a finished tiny run and the set packed from it."""
+    from tatl_mj.experiments import reference, runner
+    from tatl_mj.experiments import spec as spec_mod
+
+    folder = tmp_path_factory.mktemp("tiny-reference")
+    path = folder / "tiny_flip.toml"
+    path.write_text(TINY_REFERENCE_SPEC)
+    run = folder / "run"
+    runner.run([spec_mod.load_spec(path)], "tiny", [0, 1], run, workers=2, progress=False)
+    built = reference.build(run, "tiny", f"tatl run {path} --preset tiny --out {run}", folder / "sets")
+    return path, run, built

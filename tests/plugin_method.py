@@ -53,3 +53,14 @@ class FixedAction:
             return lambda states: np.full(len(states), index)
         value = target.action_values[index]
         return lambda states: np.repeat(value[None], len(states), axis=0)
+
+
+@dataclasses.dataclass(frozen=True)
+class SourcePolicy:
+    """Transfer with nothing learned on the target: the source's greedy policy through the mapping.
+    Its source-free ablation is :class:`ZeroTorque` (the same nothing, without the source)."""
+
+    name: str = "source-policy"
+
+    def learn(self, problem, target_samples):
+        return problem.projected_source_policy()

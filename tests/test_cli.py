@@ -157,14 +157,14 @@ def test_render_with_no_working_backend_says_how_to_fix(tmp_path):
     assert not (tmp_path / "x.mp4").exists()
 
 
-def _parsers():
-    """(name, parser) for `tatl` and each of its subcommands."""
-    parser = cli.build_parser()
-    yield "tatl", parser
+def _parsers(parser=None, prefix="tatl"):
+    """(name, parser) for `tatl` and each of its subcommands, theirs included."""
+    parser = parser or cli.build_parser()
+    yield prefix, parser
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
-                yield f"tatl {name}", sub
+                yield from _parsers(sub, f"{prefix} {name}")
 
 
 def test_version_prints_the_package_version(capsys):
@@ -187,7 +187,20 @@ def test_every_option_and_subcommand_has_help_text():
             label = "/".join(action.option_strings) or action.dest
             assert action.help not in (None, argparse.SUPPRESS) and action.help.strip(), f"{command} {label}: no help"
         parser.format_help()  # every help string formats (e.g. no stray % signs)
-    assert names == ["tatl", "tatl list", "tatl run", "tatl plot", "tatl render", "tatl bench"]
+    assert names == [
+        "tatl",
+        "tatl list",
+        "tatl run",
+        "tatl plot",
+        "tatl compare",
+        "tatl reference",
+        "tatl reference build",
+        "tatl reference list",
+        "tatl reference unpack",
+        "tatl export",
+        "tatl render",
+        "tatl bench",
+    ]
 
 
 def test_run_with_an_unknown_method_says_so_in_one_line(tmp_path, capsys):

@@ -26,7 +26,8 @@ def experiment(reach: dict, seeds: dict | None = None) -> dict:
         methods[name] = {
             "seeds": own,
             "final_return": [c[-1] for c in curves],
-            "curve": {"samples": BUDGETS, "mean_return": curves},
+            "curve": {"samples": BUDGETS, "mean_return": curves, "target_transitions": [BUDGETS] * len(curves)},
+            "data": "shared",
         }
     all_seeds = sorted({s for m in methods.values() for s in m["seeds"]})
     return {

@@ -230,10 +230,10 @@ def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
 def test_learned_and_given_maps_are_recorded_with_their_coefficients(variant):
     from tatl_mj.experiments import pipeline
 
-    table = tomllib.loads((ROOT / "tasks" / "variants" / f"{variant}.toml").read_text())
-    table["presets"] = {"tiny": {**TINY, "alignment_samples": 200}}
-    table["source_learning"]["iterations"] = 5
-    experiment = spec_mod.parse_spec(table, f"{variant}.toml")
+    experiment = spec_mod.load_spec(ROOT / "tasks" / "variants" / f"{variant}.toml")  # resolves its extends
+    tiny = spec_mod.Preset(**{**TINY, "target_budgets": tuple(TINY["target_budgets"]), "alignment_samples": 200})
+    learner = dataclasses.replace(experiment.source_learning, iterations=5)
+    experiment = dataclasses.replace(experiment, presets={"tiny": tiny}, source_learning=learner)
     artifacts = pipeline.learn_source(experiment, experiment.preset("tiny"), 0)
     record = artifacts.mapping_record
     assert np.shape(record["matrix"]) == (2, 2) and len(record["offset"]) == 2

@@ -72,7 +72,7 @@ def test_summary_reports_the_iqm_over_seeds_of_each_seeds_mean():
     assert result["value"] == pytest.approx(np.mean([0.011, 0.021]))  # the middle half of four seeds
 
 
-def test_steadiness_and_survival_use_the_compared_seeds_whose_records_carry_them():
+def test_steadiness_uses_the_compared_seeds_whose_records_carry_it_and_survival_every_compared_seed():
     experiment = {
         "methods": {
             "m": {
@@ -80,7 +80,7 @@ def test_steadiness_and_survival_use_the_compared_seeds_whose_records_carry_them
                 "final_return": [1.0] * 3,
                 "curve": {"samples": [10], "mean_return": [[1.0]] * 3},
                 "final_steadiness": {"1": {"roll_rms": [0.02]}, "2": {"roll_rms": [0.04]}},  # seed 0's is older
-                "final_steps": {"1": [5, 10], "2": [10, 10]},
+                "final_steps": {"0": [10, 10], "1": [5, 10], "2": [10, 10]},
             }
         },
         "source_seeds": [0, 1, 2],
@@ -90,4 +90,4 @@ def test_steadiness_and_survival_use_the_compared_seeds_whose_records_carry_them
     summary._survival(experiment, cap=10)
     data = experiment["methods"]["m"]
     assert data["steadiness_seeds"] == [1, 2] and data["steadiness"]["roll_rms"]["per_seed"] == [0.02, 0.04]
-    assert data["survival"]["seeds"] == [1, 2] and data["survival"]["at_cap"] == pytest.approx(0.75)
+    assert data["survival"]["seeds"] == [0, 1, 2] and data["survival"]["at_cap"] == pytest.approx(5 / 6)

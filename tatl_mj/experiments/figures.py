@@ -313,7 +313,7 @@ def _seed_curves(experiment: dict, results: Sequence[MethodResult]) -> dict[str,
         data = experiment["methods"][r.method]
         rows = [data["seeds"].index(s) for s in r.seeds]
         budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
-        counted = np.asarray(data["curve"].get("target_transitions", [budgets] * len(data["seeds"])), dtype=np.float64)
+        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)
         # Each seed at the target transitions it counted; a reference that counts none at its budget.
         curves[r.method] = (
             np.where(counted[rows] > 0, counted[rows], budgets),

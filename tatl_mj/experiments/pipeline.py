@@ -35,6 +35,7 @@ import threadpoolctl
 from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import mappings
+from tatl_mj.experiments.records import STREAM_DATA
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
 from tatl_mj.transfer import apprentice, fqi, method, tabular_q
 from tatl_mj.transfer.methods import horizon
@@ -53,27 +54,6 @@ def one_thread() -> Iterator[None]:
     """
     with threadpoolctl.threadpool_limits(limits=1), sampling.mujoco_threads(1):
         yield
-
-
-@cache  # fixed for a process's life: the libraries choose their kernels when loaded
-def kernels() -> str:
-    """The arithmetic kernels this process computes with: each BLAS library by version and
-    kernel, and numpy's SIMD targets, e.g. ``"openblas 0.3.31 Haswell; numpy X86_V3"``.
-
-    A record depends on them as on its seed: other kernels sum in another order, and the
-    same seeds then give other per-seed returns (docs/protocol.md, "Across machines").
-    """
-    import scipy.linalg  # noqa: F401 - loads scipy's own BLAS too, so every unit reports both
-
-    blas = sorted(
-        {
-            f"{info['internal_api']} {info.get('version') or '?'} {info.get('architecture') or '?'}"
-            for info in threadpoolctl.threadpool_info()
-            if info["user_api"] == "blas"
-        }
-    )
-    simd = np.show_config(mode="dicts").get("SIMD Extensions", {}).get("found") or ["baseline"]
-    return "; ".join([*blas, f"numpy {'+'.join(simd)}"])
 
 
 def derive_seed(seed: int, *names: str) -> int:
@@ -558,10 +538,6 @@ def _episode_samples(spec: ExperimentSpec, seed: int) -> Callable[[Callable | No
         )
 
     return samples
-
-
-STREAM_DATA = ("shared", "stream")
-"""``data`` settings under which a method learns from the shared stream (counted by ``samples_used``)."""
 
 
 def transfer_problem(

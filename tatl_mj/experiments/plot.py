@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from tatl_mj.experiments import credit_maps, figures, tables
-from tatl_mj.experiments.records import read_json
+from tatl_mj.experiments.records import read_record
 from tatl_mj.experiments.summary import compare
 
 
@@ -16,7 +16,7 @@ def plot(run_dir: str | Path) -> list[Path]:
     summary_path = run_dir / "summary.json"
     if not summary_path.exists():
         raise FileNotFoundError(f"{summary_path} not found: run `tatl run ... --out {run_dir}` first")
-    summary = read_json(summary_path)
+    summary = read_record(summary_path)  # an older schema's upgraded
     out = run_dir / "figures"
     out.mkdir(exist_ok=True)
     written = []

@@ -9,6 +9,12 @@ unit's keys, or a source cache (``source.pkl``) whose bytes do not match the
 SHA-256 its record holds (a disk filled up, a copy cut short, a hand edit), is
 moved aside to ``NAME.corrupt`` with a warning naming both paths, and the
 unit is computed again.
+
+Records are versioned (``schema_version``, :data:`SCHEMA_VERSION`): every unit
+record and every summary this package writes carries the version it was written
+in, and :func:`upgrade` is the one place that reads older ones, at read time
+(:func:`read_record`), so nothing downstream carries a fallback for an older
+field. A record from a newer schema is refused (:class:`SchemaError`).
 """
 
 from __future__ import annotations
@@ -30,9 +36,25 @@ SOURCE_KEYS = ("random_return",)
 METHOD_KEYS = ("curve", "final_return")
 TEMPORARY = ".{name}.{tag}.tmp"  # where write_atomic writes before its rename
 
+SCHEMA_VERSION = 2
+"""The record schema this package writes. 1: records without ``schema_version`` (every
+record before it was kept). 2: every unit record and summary names its schema; each
+point of a method's curve counts ``rollout_transitions``, the real-target transitions
+of policy rollouts charged at that budget (Algorithm 2's U_M rollouts), so that
+``target_transitions - rollout_transitions`` is the paper's accounting; and every unit
+record names its tasks' dynamics versions (``dynamics``: ``{"domain/task": N}``)."""
+STREAM_DATA = ("shared", "stream")
+"""``data`` settings under which a method learns from the shared stream (counted by ``samples_used``)."""
+UNKNOWN_KERNELS = "unknown"
+"""The ``kernels`` of a schema-1 record older than that field."""
+
 
 class RecordError(ValueError):
     """A file under a run folder is unreadable or malformed; the message names it."""
+
+
+class SchemaError(RecordError):
+    """A record written in a newer schema than this package reads; the message names the file."""
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -66,6 +88,86 @@ def read_json(path: Path) -> Any:
         raise
     except (OSError, UnicodeDecodeError, ValueError) as error:
         raise RecordError(f"{path}: unreadable or not valid JSON ({type(error).__name__}: {error})") from None
+
+
+def read_record(path: Path) -> dict:
+    """A unit's record or a summary from ``path``, in the current schema (:func:`upgrade`)."""
+    return upgrade(read_json(path), path)
+
+
+def upgrade(record: Any, where: str | Path = "<record>") -> dict:
+    """``record`` (a unit's record or a summary, read from ``where``) in schema :data:`SCHEMA_VERSION`.
+
+    Raises :class:`SchemaError` for a newer schema and :class:`RecordError` for a
+    record that is not one or lacks what no upgrade can derive; each names ``where``.
+    """
+    if not isinstance(record, dict):
+        raise RecordError(f"{where}: a JSON object expected, got {type(record).__name__}")
+    version = record.get("schema_version", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise RecordError(f"{where}: schema_version must be a whole number >= 1, got {version!r}")
+    if version > SCHEMA_VERSION:
+        raise SchemaError(
+            f"{where}: record schema {version} is newer than this tatl-mj reads (schemas 1 to "
+            f"{SCHEMA_VERSION}); install a newer tatl-mj to read it"
+        )
+    if version == 1:
+        try:
+            record = _summary_v2(record) if "experiments" in record else _unit_v2(record)
+        except (KeyError, TypeError) as error:
+            raise RecordError(f"{where}: a schema-1 record without {error}, which no upgrade can derive") from None
+    return record
+
+
+def _unit_v2(record: dict) -> dict:
+    """A schema-1 unit record (source or method) in schema 2."""
+    # Schema 1 named neither kernels (at first) nor dynamics versions: {} names none.
+    out = {**record, "schema_version": 2, "kernels": record.get("kernels", UNKNOWN_KERNELS), "dynamics": {}}
+    if "curve" not in record:
+        return out  # a source unit's
+    data = record.get("data", "shared")  # the only protocol before records named theirs
+
+    def point(p: dict) -> dict:
+        if "steps" not in p:  # per-episode lengths (survival) cannot be made up
+            raise KeyError("steps")
+        counted = p.get("target_transitions", p["samples"])  # before counting: the budget
+        rollouts = counted - p["samples_used"] if data in STREAM_DATA else 0
+        return {**p, "target_transitions": counted, "rollout_transitions": rollouts}
+
+    return {**out, "data": data, "curve": [point(p) for p in record["curve"]]}
+
+
+def _summary_v2(summary: dict) -> dict:
+    """A schema-1 summary in schema 2: what its readers (the tables, the figures) take."""
+    experiments = {}
+    for name, experiment in summary["experiments"].items():
+        experiment = dict(experiment)
+        methods = experiment["methods"]
+        if "random_returns" not in experiment and experiment.get("random_return") is not None:
+            # Before per-seed random returns: one value for every seed.
+            seeds = sorted({s for m in methods.values() for s in m.get("seeds", [])})
+            experiment["source_seeds"] = seeds
+            experiment["random_returns"] = [float(experiment["random_return"])] * len(seeds)
+        experiment["methods"] = {
+            m: {
+                **data,
+                "data": data.get("data", "shared"),
+                "curve": {
+                    **data["curve"],
+                    "target_transitions": data["curve"].get(
+                        "target_transitions", [list(data["curve"]["samples"])] * len(data["seeds"])
+                    ),
+                },
+            }
+            for m, data in methods.items()
+        }
+        experiments[name] = experiment
+    return {
+        **summary,
+        "kernels": summary.get("kernels") or {},
+        "schema_version": 2,
+        "experiments": experiments,
+    }
 
 
 def quarantine(path: Path, reason: str) -> Path:
@@ -132,8 +234,10 @@ class RunDirectory:
         if not path.exists():
             return False
         try:
-            record = read_json(path)
+            record = read_record(path)  # a newer schema's raises SchemaError: refused, not moved aside
             problem = _record_problem(record, unit)
+        except SchemaError:
+            raise
         except RecordError as error:
             record, problem = None, str(error).split(": ", 1)[-1]
         if problem:
@@ -154,7 +258,9 @@ class RunDirectory:
         return True
 
     def write_unit(self, experiment: str, seed: int, unit: str, record: dict, blob: bytes | None = None) -> None:
-        """Writes a finished unit: its cache first (if any), then its record with the cache's SHA-256."""
+        """Writes a finished unit: its cache first (if any), then its record with the cache's
+        SHA-256, in the current schema."""
+        record = {**record, "schema_version": SCHEMA_VERSION}
         if blob is not None:
             write_atomic(self.blob_path(experiment, seed), blob)
             record = {**record, "blob_sha256": sha256(blob)}

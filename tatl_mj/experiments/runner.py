@@ -38,8 +38,9 @@ from tatl_mj import sampling
 from tatl_mj.experiments import lock, pipeline, reaper
 from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments import workers as workers_mod
-from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, write_atomic, write_json
-from tatl_mj.experiments.spec import ExperimentSpec, conditions, spec_to_dict
+from tatl_mj.experiments.kernels import kernels
+from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json, read_record, write_atomic, write_json
+from tatl_mj.experiments.spec import ExperimentSpec, conditions, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import fit_time, registry
 from tatl_mj.transfer.method import contract
 
@@ -130,7 +131,8 @@ def _work(
         artifacts = pickle.loads(source_blob)
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
-    record["kernels"] = pipeline.kernels()  # what it depends on besides its settings and seed
+    record["kernels"] = kernels()  # what it depends on besides its settings and seed
+    record["dynamics"] = dynamics_versions(spec)  # and the versions of its tasks' dynamics
     record["wall_s"] = time.perf_counter() - start
     record["fqi_s"] = fit_time.fqi_seconds() - fits  # a cost, like wall_s: its part in FQI's fits
     # A cost, like wall_s: the MuJoCo substeps this unit took, by task.
@@ -273,15 +275,14 @@ def _versions() -> dict:
 
 def _kernel_counts(run_dir: RunDirectory, units: list[Unit]) -> dict[str, int]:
     """How many of the run's records each set of arithmetic kernels computed (a run resumed
-    elsewhere, or a Ray cluster of unlike nodes, can mix them); records older than the
-    field count as :data:`summary.UNKNOWN_KERNELS`."""
+    elsewhere, or a Ray cluster of unlike nodes, can mix them)."""
     counts: collections.Counter[str] = collections.Counter()
     for unit in units:
         try:
-            record = read_json(run_dir.record_path(unit.experiment, unit.seed, unit.name))
+            record = read_record(run_dir.record_path(unit.experiment, unit.seed, unit.name))
         except (OSError, ValueError):
             continue  # not finished: named among the failures
-        counts[record.get("kernels", summary_mod.UNKNOWN_KERNELS)] += 1
+        counts[record["kernels"]] += 1
     return dict(counts)
 
 
@@ -437,7 +438,7 @@ class _Recorder:
 
     def copy(self, origin: Unit, unit: Unit) -> None:
         """Writes ``origin``'s finished record as ``unit``'s (see :func:`shared_record`)."""
-        found = read_json(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
+        found = read_record(self.run_dir.record_path(origin.experiment, origin.seed, origin.name))
         self.run_dir.write_unit(unit.experiment, unit.seed, unit.name, shared_record(found, unit, origin))
         self.done.add(unit)
         self.run_dir.failure_path(unit.experiment, unit.seed, unit.name).unlink(missing_ok=True)
@@ -610,7 +611,9 @@ def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) -> dict[str, Any]:
+def physics_report(
+    run_dir: str | Path, seconds: float = 0.3, repeats: int = 3, previous: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """A run's work against its physics: the summed unit wall times (``work_s``), and the
     MuJoCo substeps its units took priced at raw ``mujoco.rollout`` speed on one thread
     (``physics_s``: per task, the fastest of ``repeats`` timings of ``seconds`` each, taken
@@ -618,9 +621,38 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
 
     ``fqi_s`` is the part of the work spent in FQI's fits, and ``floor_s`` the physics and
     those fits together: all but the rest of the work, which is what code that keeps
-    the fits can save (both None when some counted records do not time their fits)."""
+    the fits can save (both None when some counted records do not time their fits).
+
+    ``previous``: an earlier report of this folder (its physics.json), returned as it is
+    when the records hold the same work (no unit ran since), so a finished run's rerun
+    does not time the physics again."""
     from tatl_mj import bench
 
+    counted = _physics_counts(run_dir)
+    if previous is not None and {k: previous.get(k) for k in counted} == counted:
+        return previous
+    by_task = {}
+    for key, n in sorted(counted["substeps"].items()):
+        domain, task = key.split("/", 1)
+        # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
+        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
+        timed = max(tries, key=lambda t: t["steps_per_s"])
+        rate = timed["steps_per_s"] * timed["substeps"]
+        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
+    physics_s = sum(v["raw_s"] for v in by_task.values())
+    work_s, fqi_s = counted["work_s"], counted["fqi_s"]
+    return {
+        **counted,
+        "physics_s": physics_s,
+        "ratio": work_s / physics_s if physics_s else None,
+        "floor_s": None if fqi_s is None else physics_s + fqi_s,
+        "by_task": by_task,
+    }
+
+
+def _physics_counts(run_dir: str | Path) -> dict[str, Any]:
+    """What :func:`physics_report` sums from the records: work, FQI's part, substeps by task,
+    and how many records have no substep count."""
     substeps: dict[str, int] = {}
     work_s, fqi_s, uncounted, untimed = 0.0, 0.0, 0, 0
     for path in sorted((RunDirectory(run_dir).root / "records").glob("*/seed*/*.json")):
@@ -638,22 +670,10 @@ def physics_report(run_dir: str | Path, seconds: float = 0.3, repeats: int = 3) 
             untimed += 1
         for key, n in record["physics_substeps"].items():
             substeps[key] = substeps.get(key, 0) + int(n)
-    by_task = {}
-    for key, n in sorted(substeps.items()):
-        domain, task = key.split("/", 1)
-        # The fastest of a few: one short timing moved the ratio by a fifth on a drifting machine.
-        tries = [bench.time_rollout(domain, task, seconds, threads=1) for _ in range(repeats)]
-        timed = max(tries, key=lambda t: t["steps_per_s"])
-        rate = timed["steps_per_s"] * timed["substeps"]
-        by_task[key] = {"substeps": n, "raw_substeps_per_s": rate, "raw_s": n / rate}
-    physics_s = sum(v["raw_s"] for v in by_task.values())
     return {
         "work_s": work_s,
-        "physics_s": physics_s,
-        "ratio": work_s / physics_s if physics_s else None,
         "fqi_s": None if untimed else fqi_s,
-        "floor_s": None if untimed else physics_s + fqi_s,
-        "by_task": by_task,
+        "substeps": dict(sorted(substeps.items())),
         "records_without_counts": uncounted,
     }
 

@@ -26,8 +26,7 @@ Definitions (one place; the table, the figures and summary.json all use them):
   the smallest budget from which its return stays at or above the threshold at
   every larger budget (a method that crosses and falls back has not reached it);
   ``math.inf`` if it never does (``null`` in summary.json, which has no infinity).
-  Records from before transitions were counted fall back to the budget. The same
-  on the paper's accounting (its apprentice samples, Algorithm 2's rollouts not
+  The same on the paper's accounting (its apprentice samples, Algorithm 2's rollouts not
   counted) is ``samples_to_threshold_paper``.
 
 :func:`compare` applies them to one experiment of a summary; the results table
@@ -45,7 +44,7 @@ import numpy as np
 
 from tatl_mj.experiments import statistics as stats
 from tatl_mj.experiments import verdicts
-from tatl_mj.experiments.records import RunDirectory, read_json
+from tatl_mj.experiments.records import SCHEMA_VERSION, UNKNOWN_KERNELS, RunDirectory, read_record
 
 THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
 REFERENCE_THRESHOLD = 0.9  # normalised score: the threshold with a declared reference return
@@ -149,8 +148,7 @@ def compare(experiment: dict, methods: Sequence[str] | None = None, fraction: fl
     ``experiment`` is ``summary["experiments"][name]``: it needs ``methods``
     (per method ``seeds``, ``final_return``, ``curve.samples`` and
     ``curve.mean_return``) and the random policy's return per seed
-    (``random_returns``, aligned with ``source_seeds``; older summaries give one
-    ``random_return``). ``methods`` are the names asked for, in display order
+    (``random_returns``, aligned with ``source_seeds``). ``methods`` are the names asked for, in display order
     (default: those with records, in the summary's order).
     """
     data = experiment["methods"]
@@ -275,13 +273,9 @@ def _samples_text(value: float) -> str:
 
 
 def _random_by_seed(experiment: dict) -> dict[int, float] | None:
-    if "random_returns" in experiment:
-        return dict(zip(experiment["source_seeds"], experiment["random_returns"]))
-    if experiment.get("random_return") is None:
+    if "random_returns" not in experiment:
         return None
-    # An older summary: one value for every seed.
-    seeds = {s for m in experiment["methods"].values() for s in m.get("seeds", [])}
-    return {s: float(experiment["random_return"]) for s in seeds}
+    return dict(zip(experiment["source_seeds"], experiment["random_returns"]))
 
 
 def _experiment(
@@ -352,13 +346,13 @@ def _read_records(
     for seed in seeds:
         path = run_dir.record_path(name, seed, "source")
         if path.exists():
-            sources[seed] = read_json(path)
+            sources[seed] = read_record(path)
     records: dict[str, dict[int, dict]] = {m: {} for m in methods}
     for m in methods:
         for seed in seeds:
             path = run_dir.record_path(name, seed, m)
             if path.exists():
-                records[m][seed] = read_json(path)
+                records[m][seed] = read_record(path)
     return sources, records
 
 
@@ -374,14 +368,14 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             "mean_return": [[p["mean_return"] for p in c] for c in curves],  # [seed][budget]
             "mean_steps": [[p["mean_steps"] for p in c] for c in curves],
             # Every real-target transition counted at each budget ([seed][budget]).
-            "target_transitions": [[p.get("target_transitions", p["samples"]) for p in c] for c in curves],
+            "target_transitions": [[p["target_transitions"] for p in c] for c in curves],
             # Of those, the real-target transitions of policy rollouts (Algorithm 2's U_M): the
             # paper's accounting leaves them out ([seed][budget]).
-            "rollout_transitions": [[p.get("rollout_transitions", 0) for p in c] for c in curves],
+            "rollout_transitions": [[p["rollout_transitions"] for p in c] for c in curves],
         },
-        "data": recs[seeds_done[0]].get("data", "shared"),
-        # Per seed, each evaluation episode's steps at the largest budget (records that have them).
-        "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done if "steps" in recs[s]["curve"][-1]},
+        "data": recs[seeds_done[0]]["data"],
+        # Per seed, each evaluation episode's steps at the largest budget.
+        "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done},
         # Per seed, each evaluation episode's steadiness at the largest budget (where declared).
         "final_steadiness": {
             str(s): recs[s]["curve"][-1]["steadiness"] for s in seeds_done if "steadiness" in recs[s]["curve"][-1]
@@ -397,7 +391,6 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
     }
 
 
-UNKNOWN_KERNELS = "unknown"  # the kernels of records older than their "kernels" field
 STOPPING_RULE = "apprentice stopping rule"  # the start of Algorithm 2's not-met warning
 
 
@@ -437,8 +430,8 @@ def _steadiness(experiment: dict) -> None:
     its interval, in place."""
     compared = compare(experiment).seeds
     for data in experiment["methods"].values():
-        # The compared seeds whose records carry it (older records may not: said in the table).
-        seeds = [s for s in compared if str(s) in data.get("final_steadiness", {})]
+        # The compared seeds whose records carry it (where the target declares it).
+        seeds = [s for s in compared if str(s) in data["final_steadiness"]]
         per_seed = [data["final_steadiness"][str(s)] for s in seeds]
         if not seeds:
             continue
@@ -467,12 +460,10 @@ def _survival(experiment: dict, cap: int | None) -> None:
     over the compared seeds and censored at the episode cap, where any episode ended early."""
     if cap is None:
         return
-    compared = compare(experiment).seeds
+    seeds = list(compare(experiment).seeds)
+    if not seeds:
+        return
     for data in experiment["methods"].values():
-        # The compared seeds whose records carry episode lengths (older records may not).
-        seeds = [s for s in compared if str(s) in data.get("final_steps", {})]
-        if not seeds:
-            continue
         lengths = np.concatenate([np.asarray(data["final_steps"][str(s)], dtype=np.float64) for s in seeds])
         times, probability = stats.survival(lengths, cap)
         if len(times):
@@ -599,5 +590,6 @@ def build(
         "threshold_fraction": THRESHOLD_FRACTION,
         "reference_threshold": REFERENCE_THRESHOLD,
         "verdict_rule_version": verdicts.VERDICT_RULE_VERSION,
+        "schema_version": SCHEMA_VERSION,
         **extra,
     }

@@ -151,7 +151,7 @@ def _method_rows(exp: dict, comparison: Comparison) -> list[str]:
             paper = samples_text(r.median_samples_paper)
         else:
             counted, paper = "no meaningful threshold", "n/a"
-        row = f"| {method_label(r.method)} | {data.get('data', 'shared')} | {final} | {counted} | {paper} "
+        row = f"| {method_label(r.method)} | {data['data']} | {final} | {counted} | {paper} "
         if stats_on:
             first_policy = data.get("first_policy") or {}
             row += (

@@ -94,6 +94,7 @@ CG_ARM = 0.5  # m, half the distance between the two forces of the rider's coupl
 TORQUE_LIMIT = 2.0  # N m
 
 ACTIONS = np.array([[-TORQUE_LIMIT], [0.0], [TORQUE_LIMIT]])
+DYNAMICS_VERSION = 1  # of every task here; docs/versions.md says when it is bumped
 # The camera clips film from (tatl_mj.render): from behind, so the roll (what the task is
 # about) is across the line of sight; the side-on "tracking" camera looks along it.
 CAMERA = "behind"
@@ -560,6 +561,7 @@ def describe(task: str, **_: Any) -> TaskDescription:
     return TaskDescription(
         domain="bicycle",
         task=task,
+        dynamics_version=DYNAMICS_VERSION,
         state_names=("steer", "steer_rate", "roll", "roll_rate"),
         periodic=(False,) * 4,
         action_values=ACTIONS,

@@ -55,6 +55,7 @@ X_LIMIT = 2.4  # m
 START_HALF_WIDTH = 0.05  # every state entry starts uniform in +-0.05
 
 ACTIONS = np.array([[-20.0], [0.0], [20.0]])
+DYNAMICS_VERSION = 1  # of every task here; docs/versions.md says when it is bumped
 # The camera clips film from (tatl_mj.render): side-on, following the cart, so the pole
 # swings in the image plane and fills the frame ("fixed" shows the whole rail, small).
 CAMERA = "tracking"
@@ -173,6 +174,7 @@ def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskD
     return TaskDescription(
         domain="cartpole",
         task=task,
+        dynamics_version=DYNAMICS_VERSION,
         state_names=("x", "x_dot", "theta", "theta_dot"),
         periodic=(False,) * 4,
         action_values=ACTIONS,

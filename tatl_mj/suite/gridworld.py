@@ -84,6 +84,7 @@ LAYOUT: tuple[str, ...] = (
 WIND = np.array([0, 0, 0, 1, 1, 1, 2, 2, 1, 0])  # cells pushed up per step, per column
 
 ACTIONS = np.arange(4)
+DYNAMICS_VERSION = 1  # of every task here; docs/versions.md says when it is bumped
 ACTION_NAMES = ("up", "down", "left", "right")
 MOVES = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]])  # (d_row, d_col) per action
 
@@ -391,6 +392,7 @@ def describe(task: str, stochastic_wind: bool = False, **_: Any) -> TaskDescript
     return TaskDescription(
         domain="gridworld",
         task=task,
+        dynamics_version=DYNAMICS_VERSION,
         state_names=("row", "col"),
         periodic=(False, False),
         action_values=MOVES.astype(np.float64),

@@ -94,6 +94,7 @@ START_RANGE = (-0.6, -0.4)  # m
 SETTABLE_X = (-1.25, 0.8)  # m
 
 ACTIONS = np.array([[-1.0], [0.0], [1.0]])
+DYNAMICS_VERSION = 1  # of every task here; docs/versions.md says when it is bumped
 
 _HILL_AMPLITUDE, _HILL_FREQUENCY, _HILL_OFFSET = 0.45, 3.0, 0.55
 
@@ -344,6 +345,7 @@ def describe(task: str, **_: Any) -> TaskDescription:
     return TaskDescription(
         domain="mountain_car",
         task=task,
+        dynamics_version=DYNAMICS_VERSION,
         state_names=("x", "v"),
         periodic=(False, False),
         action_values=ACTIONS,

@@ -60,6 +60,7 @@ SCHEDULE_AMPLITUDE = 0.5  # m and kg
 SCHEDULE_PERIOD_STEPS = 100  # cos(pi i / 50) repeats every 100 control steps
 
 ACTIONS = np.array([[-4.0], [0.0], [4.0]])
+DYNAMICS_VERSION = 1  # of every task here; docs/versions.md says when it is bumped
 
 
 @dataclasses.dataclass(frozen=True)
@@ -316,6 +317,7 @@ def describe(task: str, params: PendulumParams | None = None, **_: Any) -> TaskD
     return TaskDescription(
         domain="pendulum",
         task=task,
+        dynamics_version=DYNAMICS_VERSION,
         state_names=("theta", "theta_dot"),
         periodic=(True, False),
         angle_origin=(math.pi, 0.0),

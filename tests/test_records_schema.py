@@ -1,0 +1,120 @@
+"""Versioned records: the upgrade of real schema-1 records, and the refusal of a newer schema.
+
+The schema-1 fixtures in tests/data/schema1 are records of a smoke run of the
+code before records were versioned (the flipped pendulum, seed 0).
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tatl_mj.experiments import records
+
+SCHEMA1 = Path(__file__).parent / "data" / "schema1"
+
+
+def old(name: str) -> dict:
+    return json.loads((SCHEMA1 / f"{name}.json").read_text())
+
+
+def test_a_schema1_method_record_gains_its_version_and_its_rollouts():
+    record = old("ta-tl")
+    assert "schema_version" not in record
+    new = records.upgrade(record, "ta-tl.json")
+    assert new["schema_version"] == records.SCHEMA_VERSION == 2
+    # TA-TL learns from the shared stream: what it counted beyond the samples it kept were rollouts.
+    counted = [p["target_transitions"] for p in record["curve"]]
+    kept = [p["samples_used"] for p in record["curve"]]
+    assert counted == [900, 900, 900] and kept == [100, 100, 100]
+    assert [p["rollout_transitions"] for p in new["curve"]] == [800, 800, 800]
+    # Nothing else moves.
+    assert [{k: v for k, v in p.items() if k != "rollout_transitions"} for p in new["curve"]] == record["curve"]
+    assert new["dynamics"] == {}  # schema 1 named no dynamics versions
+    assert {k: v for k, v in new.items() if k not in ("schema_version", "curve", "dynamics")} == {
+        k: v for k, v in record.items() if k != "curve"
+    }
+    assert records.upgrade(new, "ta-tl.json") == new  # the current schema reads as it is
+
+
+def test_a_method_drawing_its_own_data_charges_no_rollouts():
+    record = old("rl-reset")
+    assert record["data"] == "reset"
+    assert [p["rollout_transitions"] for p in records.upgrade(record)["curve"]] == [0, 0, 0]
+
+
+def test_records_older_than_counting_kernels_and_protocols_are_read_with_the_old_meaning():
+    record = old("ta-tl")
+    for key in ("data", "kernels"):
+        del record[key]
+    for point in record["curve"]:
+        del point["target_transitions"]
+    new = records.upgrade(record)
+    # Before transitions were counted a point counted its budget; before protocols, "shared".
+    assert [p["target_transitions"] for p in new["curve"]] == [100, 400, 1600]
+    assert [p["rollout_transitions"] for p in new["curve"]] == [0, 300, 1500]
+    assert new["data"] == "shared" and new["kernels"] == records.UNKNOWN_KERNELS
+
+
+def test_a_source_record_gains_its_version_and_names_no_dynamics():
+    record = old("source")
+    assert records.upgrade(record) == {**record, "schema_version": 2, "dynamics": {}}
+
+
+def test_a_record_that_no_upgrade_can_complete_is_named_with_what_it_lacks():
+    record = old("ta-tl")
+    del record["curve"][1]["steps"]
+    with pytest.raises(records.RecordError) as caught:
+        records.upgrade(record, "records/x/seed0/ta-tl.json")
+    assert str(caught.value) == (
+        "records/x/seed0/ta-tl.json: a schema-1 record without 'steps', which no upgrade can derive"
+    )
+
+
+def test_a_newer_schema_is_refused_in_one_line_naming_the_file():
+    with pytest.raises(records.SchemaError) as caught:
+        records.upgrade({**old("ta-tl"), "schema_version": 3}, "runs/x/records/e/seed0/ta-tl.json")
+    assert str(caught.value) == (
+        "runs/x/records/e/seed0/ta-tl.json: record schema 3 is newer than this tatl-mj reads "
+        "(schemas 1 to 2); install a newer tatl-mj to read it"
+    )
+    with pytest.raises(records.RecordError, match="schema_version must be a whole number >= 1, got '2'"):
+        records.upgrade({**old("ta-tl"), "schema_version": "2"}, "x.json")
+
+
+def test_a_schema1_summary_gains_per_seed_random_returns_and_counted_transitions():
+    summary = {
+        "preset": "smoke",
+        "experiments": {
+            "e": {
+                "random_return": -5.0,
+                "methods": {"rl": {"seeds": [3, 1], "curve": {"samples": [10, 20], "mean_return": [[0, 1], [1, 2]]}}},
+            }
+        },
+    }
+    new = records.upgrade(summary)
+    experiment = new["experiments"]["e"]
+    assert new["schema_version"] == 2 and new["kernels"] == {}
+    assert experiment["source_seeds"] == [1, 3] and experiment["random_returns"] == [-5.0, -5.0]
+    assert experiment["methods"]["rl"]["data"] == "shared"
+    assert experiment["methods"]["rl"]["curve"]["target_transitions"] == [[10, 20], [10, 20]]
+    assert summary["experiments"]["e"]["methods"]["rl"]["curve"].keys() == {"samples", "mean_return"}  # a copy
+
+
+def test_a_run_folder_reads_old_records_upgraded_and_refuses_newer_ones(tmp_path):
+    folder = records.RunDirectory(tmp_path)
+    path = folder.record_path("e", 0, "ta-tl")
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(old("ta-tl")))
+    assert folder.is_done("e", 0, "ta-tl")
+    assert records.read_record(path)["curve"][0]["rollout_transitions"] == 800
+    path.write_text(json.dumps({**old("ta-tl"), "schema_version": 9}))
+    with pytest.raises(records.SchemaError, match=f"^{path}: record schema 9 is newer"):
+        folder.is_done("e", 0, "ta-tl")
+    assert path.exists()  # refused, not moved aside as corrupt
+
+
+def test_every_record_written_names_the_current_schema(tmp_path):
+    folder = records.RunDirectory(tmp_path)
+    folder.write_unit("e", 0, "rl", {"curve": [], "final_return": 0.0})
+    assert records.read_json(folder.record_path("e", 0, "rl"))["schema_version"] == records.SCHEMA_VERSION
