@@ -154,18 +154,20 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
     spec, preset, artifacts = flipped
     record = pipeline.run_method(spec, preset, 0, "ta-tl", artifacts)
     problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
-    # By hand: the projected source policy's episodes from Algorithm 2's own starts.
+    # By hand: the projected source policy's episodes (Algorithm 2's k trials) from its own starts.
+    k = spec.methods["ta-tl"].get("utility_episodes", preset.evaluation_episodes)
     starts_seed = pipeline.derive_seed(0, spec.name, "algorithm2-starts")
-    _, lengths = pipeline.target_returns(spec, preset, problem.projected_source_policy(), starts_seed)
+    trials = dataclasses.replace(preset, evaluation_episodes=k)
+    _, lengths = pipeline.target_returns(spec, trials, problem.projected_source_policy(), starts_seed)
     rollout = int(lengths.sum())
-    assert rollout == preset.evaluation_episodes * preset.evaluation_steps  # the pendulum never ends early
+    assert rollout == k * preset.evaluation_steps  # the pendulum never ends early
     for point in record["curve"]:
         assert point["target_transitions"] == point["samples_used"] + rollout
         assert point["rollout_transitions"] == rollout  # the paper does not count these
-    # Algorithm 2's k trials as a setting: one episode of U_M charges one episode's steps.
-    one = registry.resolve("ta-tl-k1", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 1})
-    record = pipeline.run_method(spec, preset, 0, "ta-tl-k1", artifacts, transfer=one)
-    assert {p["rollout_transitions"] for p in record["curve"]} == {preset.evaluation_steps}
+    # Algorithm 2's k trials as a setting: two episodes of U_M charge two episodes' steps.
+    two = registry.resolve("ta-tl-k2", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 2})
+    record = pipeline.run_method(spec, preset, 0, "ta-tl-k2", artifacts, transfer=two)
+    assert {p["rollout_transitions"] for p in record["curve"]} == {2 * preset.evaluation_steps}
     # zeta = "none" in a spec: Algorithm 2 off, every sample used, nothing rolled out.
     off = registry.resolve("ta-tl-all", {"method": "ta-tl", "zeta": "none"})
     assert off.zeta is None
