@@ -124,7 +124,10 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         self._limit = min(self._task_steps, max_episode_steps or np.inf)
         self._batch = self._sim.new_batch(self.num_envs)
         # A model per step of an episode (model_for_step): per-simulation fields of the batch.
-        self._schedule = None if self._sim.fast else StepModels(self._task, self._envs[0].physics, self._batch)
+        if self._sim.fast:
+            self._schedule = None
+        else:
+            self._schedule = StepModels(self._task, self._envs[0].physics, self._batch, self._limit)
         self._all = np.arange(self.num_envs)
         self._states = np.zeros((self.num_envs, self._sim.physics.STATE_SIZE))
         self._steps = np.zeros(self.num_envs, np.int64)
@@ -254,39 +257,52 @@ class StepModels:
     (derived constants included); the fields in which it differs from the batch's
     model are kept, a row per step, and each call of :meth:`set` writes every
     simulation's row. Copying whole models instead would copy their textures
-    too (megabytes, milliseconds each).
+    too (megabytes, milliseconds each). The steps of a whole episode (up to
+    ``AHEAD``) are made at once, when the env is made, so that stepping never
+    waits for them.
     """
 
-    def __init__(self, task: Any, physics: Any, batch: Any) -> None:
+    AHEAD = 1024  # steps made when the env is made, if an episode lasts that long
+
+    def __init__(self, task: Any, physics: Any, batch: Any, episode_steps: float) -> None:
         self.task, self.physics, self.batch = task, physics, batch
         model = batch.get_model(0)
         self.base = {name: np.array(_model_field(model, name)) for name in mujoco.batch.MODEL_FIELDS}
-        self.rows: dict[str, list[np.ndarray]] = {}  # field -> its value at steps 0, 1, ...
-        self.tables: dict[str, np.ndarray] = {}  # the same, stacked
+        self.tables: dict[str, np.ndarray] = {}  # field -> its value at steps 0, 1, ... (rows known)
         self.live: dict[str, np.ndarray] = {}  # field -> the batch's per-simulation values
         self.known = 0
+        self._make(int(min(episode_steps, self.AHEAD)))
 
     def set(self, steps: np.ndarray) -> None:
         """Gives simulation i the model of its episode's step ``steps[i]``."""
-        needed = int(steps.max()) + 1
-        if needed > self.known:
-            while self.known < needed:
-                self._add(self.known)
-            self.tables = {name: np.stack(rows) for name, rows in self.rows.items()}
+        self._make(int(steps.max()) + 1)
         for name, live in self.live.items():
             live[:] = self.tables[name][steps]
 
-    def _add(self, step: int) -> None:
+    def _make(self, needed: int) -> None:
+        """Makes the rows of steps up to ``needed - 1``, the tables grown by doubling."""
+        if needed <= self.known:
+            return
+        capacity = max(needed, 2 * self.known)
+        for name, table in self.tables.items():
+            grown = np.empty((capacity, *table.shape[1:]), table.dtype)
+            grown[: len(table)] = table
+            self.tables[name] = grown
+        while self.known < needed:
+            self._add(self.known, capacity)
+
+    def _add(self, step: int, capacity: int) -> None:
         self.task.model_for_step(self.physics, step)
         model = self.physics.model.ptr
         for name, base in self.base.items():
             value = np.asarray(_model_field(model, name))
-            if name not in self.rows and value.tobytes() != base.tobytes():
+            if name not in self.tables and value.tobytes() != base.tobytes():
                 # First seen to change at this step: the earlier steps had the batch's value.
-                self.rows[name] = [base] * step
+                self.tables[name] = np.empty((capacity, *base.shape), base.dtype)
+                self.tables[name][:step] = base
                 self.live[name] = self.batch.expand(name)
-            if name in self.rows:
-                self.rows[name].append(value.copy())
+            if name in self.tables:
+                self.tables[name][step] = value
         self.known = step + 1
 
 

@@ -193,3 +193,20 @@ def test_bad_calls_name_what_is_wrong():
         envs.reset(options={"other": 1})
     with pytest.raises(ValueError, match="unknown physics task gridworld/plain"):
         vector.TatlVectorEnv("gridworld", "plain")
+
+
+def test_step_models_made_beyond_those_made_ahead_are_the_same(monkeypatch):
+    # The time-varying pendulum's models of steps past StepModels.AHEAD are made while
+    # stepping (their tables grown); the envs stay the single envs.
+    monkeypatch.setattr(vector.StepModels, "AHEAD", 3)
+    env_id, n, seed = "tatl_mj/PendulumSwingupTimevarying-v2", 3, 4
+    actions = _actions(n, 60, seed=5)
+    first, expected = _replay(env_id, n, seed, actions, {"time_limit": 2.5})  # 50 steps
+    envs = _vector(env_id, n, task_kwargs={"time_limit": 2.5})
+    assert envs.unwrapped._schedule.known == 3
+    np.testing.assert_array_equal(envs.reset(seed=seed)[0], first)
+    for t, row in enumerate(actions):
+        got = envs.step(row)
+        for k in range(4):
+            np.testing.assert_array_equal(got[k], expected[t][k])
+    assert envs.unwrapped._schedule.known == 50
