@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sets up everything tatl-mj needs on a fresh Debian machine: the OSMesa GL
 # library (for headless rendering without EGL), a virtual environment in .venv
-# and the package with its test and Ray extras. Safe to run again.
+# and the package with the extras in TATL_EXTRAS (default test,ray; test.sh adds
+# sb3). Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,12 +21,18 @@ fi
 
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
-# Install only when pyproject.toml changed since the last install (a stamp in
-# .venv), so reruns are quiet and fast.
+EXTRAS=${TATL_EXTRAS:-test,ray}
+# Install only when pyproject.toml or the extras changed since the last install
+# (a stamp in .venv), so reruns are quiet and fast.
 stamp=.venv/.tatl-installed
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+want="$(sha256sum pyproject.toml | cut -d' ' -f1) $EXTRAS"
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
-  .venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,ray]"
+  if [[ ",$EXTRAS," == *",sb3,"* ]]; then
+    # torch first, pinned: the CPU build the tests ran on (on this project's machines a
+    # wheel on disk); the newest torch on PyPI brings gigabytes of CUDA libraries.
+    .venv/bin/python -m pip install -q --disable-pip-version-check "torch==2.13.0"
+  fi
+  .venv/bin/python -m pip install -q --disable-pip-version-check -e ".[$EXTRAS]"
   echo "$want" > "$stamp"
 fi

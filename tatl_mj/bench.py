@@ -20,6 +20,13 @@ others, since a shared machine's speed drifts by up to 2x within seconds:
   CartPole-v1, Pendulum-v1 and MountainCar-v0; skipped with a note when
   gymnasium is not installed.
 
+Then the Gymnasium vector envs of every physics task of those domains
+(``--vector-tasks``), ``--vector-envs`` (64) copies stepped with random actions
+(env-steps per second, autoreset included): ``vector``, the native one
+(``gym.make_vec(..., vectorization_mode="vector_entry_point")``, on ``--threads``
+MuJoCo threads), beside ``sync_vector`` (Gymnasium's ``SyncVectorEnv`` over the
+same id) and ``rollout`` (raw ``mujoco.rollout`` of the same task, as above).
+
 Then Fitted Q-Iteration on 100 000 cart-pole transitions, 640x480 frames per
 second from the tracking camera (under the current ``MUJOCO_GL``), and the peak
 memory of collecting 10^6 cart-pole transitions. ``--json`` prints one JSON
@@ -87,6 +94,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="cart-pole transitions FQI is fitted on (default 100 000; 0 skips it)",
     )
     parser.add_argument("--render-frames", type=int, default=60, help="frames for the render figure (0 skips it)")
+    parser.add_argument(
+        "--vector-tasks",
+        default=None,
+        help="comma-separated domain/task list for the vector-env figures (default: every physics task of "
+        "the domains timed; empty skips them)",
+    )
+    parser.add_argument("--vector-envs", type=int, default=64, help="envs of each vector env (default 64)")
+
+
+def _vector_tasks(args: argparse.Namespace, domains: list[str]) -> list[tuple[str, str]]:
+    """The ``domain/task`` pairs whose vector envs are timed (checked against the physics tasks)."""
+    from tatl_mj import suite
+
+    physics = [(d, t) for d, t in suite.ALL_TASKS if not suite.describe(d, t).discrete]
+    if args.vector_tasks is None:
+        return [(d, t) for d, t in physics if d in domains]
+    chosen = [tuple(item.split("/", 1)) for item in str(args.vector_tasks).split(",") if item]
+    unknown = [f"{c[0]}/{c[-1]}" for c in chosen if c not in physics]
+    if unknown:
+        raise ValueError(f"--vector-tasks: unknown {unknown}; valid: {[f'{d}/{t}' for d, t in physics]}")
+    return chosen  # type: ignore[return-value]
 
 
 def _check(args: argparse.Namespace) -> list[str]:
@@ -101,6 +129,8 @@ def _check(args: argparse.Namespace) -> list[str]:
         raise ValueError(f"--threads must be >= 1, got {args.threads}")
     if args.repeats < 1:
         raise ValueError(f"--repeats must be >= 1, got {args.repeats}")
+    if args.vector_envs < 1:
+        raise ValueError(f"--vector-envs must be >= 1, got {args.vector_envs}")
     if not args.seconds > 0:
         raise ValueError(f"--seconds must be > 0, got {args.seconds}")
     for name in ("memory_transitions", "fqi_transitions", "render_frames"):
@@ -265,6 +295,38 @@ def time_gymnasium(env_id: str, seconds: float, seed: int = 0) -> dict[str, Any]
             }
 
 
+def time_vector_env(
+    domain: str, task: str, seconds: float, threads: int, num_envs: int, mode: str, seed: int = 0
+) -> dict[str, Any]:
+    """Random actions through a Gymnasium vector env of ``num_envs`` copies of the task's id.
+
+    ``mode`` is ``make_vec``'s ``vectorization_mode``: ``"vector_entry_point"``
+    (tatl-mj's batched one, on ``threads`` MuJoCo threads) or ``"sync"``
+    (``SyncVectorEnv``). Counts env-steps; autoreset (``NEXT_STEP``) included.
+    Returns ``{"skipped": why}`` when gymnasium is not installed.
+    """
+    try:
+        import gymnasium
+
+        from tatl_mj import gym as tatl_gym
+    except ImportError as error:
+        return {"skipped": f"gymnasium is not installed ({error})"}
+    options = {"n_threads": threads} if mode == "vector_entry_point" else {}
+    envs = gymnasium.make_vec(tatl_gym.gym_id(domain, task), num_envs=num_envs, vectorization_mode=mode, **options)
+    space = envs.single_action_space
+    rng = np.random.default_rng(seed)
+    envs.reset(seed=seed)
+    steps, start = 0, time.perf_counter()
+    while True:
+        for action in rng.uniform(space.low, space.high, size=(100, num_envs, *space.shape)).astype(space.dtype):
+            envs.step(action)
+        steps += 100 * num_envs
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            envs.close()
+            return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed, "num_envs": num_envs}
+
+
 # --- Learning, rendering, memory ----------------------------------------------------------
 
 
@@ -339,6 +401,7 @@ def run(args: argparse.Namespace) -> int:
     """Runs the benchmark; prints a table, or JSON lines with ``--json``. Returns 0."""
     try:
         domains = _check(args)
+        _vector_tasks(args, domains)
     except ValueError as error:
         print(f"tatl bench: {error}")
         return 2
@@ -351,6 +414,7 @@ def run(args: argparse.Namespace) -> int:
         )
     physics = _physics_tasks()
     per_domain = {domain: _time_domain(domain, physics[domain], args, emit) for domain in domains}
+    vector = {f"{d}/{t}": _time_vector(d, t, args, emit) for d, t in _vector_tasks(args, domains)}
     extra: dict[str, Any] = {}
     # Memory first, so that the process's peak RSS is not FQI's or the renderer's.
     if args.memory_transitions:
@@ -362,10 +426,16 @@ def run(args: argparse.Namespace) -> int:
     if args.render_frames:
         extra["render"] = time_render(args.render_frames)
         emit({"kind": "render", **extra["render"]})
-    summary: dict[str, Any] = {"kind": "summary", "threads": args.threads, "machine": info}
+    summary: dict[str, Any] = {
+        "kind": "summary",
+        "threads": args.threads,
+        "vector_envs": args.vector_envs,
+        "machine": info,
+    }
     if _reference()[0] in per_domain:
         summary.update(per_domain[_reference()[0]])
     summary["domains"] = per_domain
+    summary["vector"] = {task: figures for task, figures in vector.items() if figures}
     summary["fqi_fit_s"] = extra.get("fqi", {}).get("seconds")
     summary["render_fps"] = extra.get("render", {}).get("fps")
     summary["memory_peak_mb"] = extra.get("memory", {}).get("peak_mb")
@@ -396,6 +466,39 @@ def _time_domain(domain: str, task: str, args: argparse.Namespace, emit: Callabl
     return {f"{p}_steps_per_s": r["steps_per_s"] for p, r in figures.items()} | _ratios(figures)
 
 
+def _time_vector(domain: str, task: str, args: argparse.Namespace, emit: Callable[[dict], None]) -> dict[str, float]:
+    """Times one task's native vector env beside SyncVectorEnv and raw rollout; returns rates and ratios
+    (empty, with a note emitted, without gymnasium)."""
+    timed = functools.partial(time_vector_env, domain, task, args.seconds / 2, args.threads, args.vector_envs)
+    probe = time_vector_env(domain, task, 0.0, args.threads, 1, "sync")  # is gymnasium there at all?
+    if "skipped" in probe:
+        emit({"kind": "vector", "domain": domain, "task": task, **probe})
+        return {}
+    timers = {
+        "vector": functools.partial(timed, "vector_entry_point"),
+        "sync_vector": functools.partial(timed, "sync"),
+        "rollout": functools.partial(time_rollout, domain, task, args.seconds / 2, args.threads),
+    }
+    figures = _fastest_of(timers, args.repeats)
+    for path, record in figures.items():
+        emit({"kind": "vector", "domain": domain, "task": task, "path": path, **record})
+    rate = {path: record["steps_per_s"] for path, record in figures.items()}
+    return {f"{p}_steps_per_s": r for p, r in rate.items()} | {
+        "vector_vs_rollout": rate["vector"] / rate["rollout"],
+        "vector_vs_rollout_paired": _paired(figures, "vector", "rollout"),
+        "vector_vs_sync_vector": rate["vector"] / rate["sync_vector"],
+        "vector_vs_sync_vector_paired": _paired(figures, "vector", "sync_vector"),
+        # The most any vector env of this physics could reach against SyncVectorEnv here.
+        "rollout_vs_sync_vector": rate["rollout"] / rate["sync_vector"],
+    }
+
+
+def _paired(figures: dict[str, dict[str, Any]], path: str, against: str) -> float:
+    """The median over repeats of ``path``'s rate over ``against``'s timed right beside it: the
+    machine's drift between repeats cancels."""
+    return float(np.median(np.divide(figures[path]["each_steps_per_s"], figures[against]["each_steps_per_s"])))
+
+
 def _ratios(figures: dict[str, dict[str, Any]]) -> dict[str, float]:
     """How the stepping paths' fastest rates compare."""
     rate = {path: record["steps_per_s"] for path, record in figures.items()}
@@ -404,9 +507,7 @@ def _ratios(figures: dict[str, dict[str, Any]]) -> dict[str, float]:
         "sampler_vs_rollout": rate["sampler"] / rate["rollout"],
         # Each repeat's sampler against the rollout timed right after it: the machine's
         # drift between repeats cancels; the median of those pairs.
-        "sampler_vs_rollout_paired": float(
-            np.median(np.divide(figures["sampler"]["each_steps_per_s"], figures["rollout"]["each_steps_per_s"]))
-        ),
+        "sampler_vs_rollout_paired": _paired(figures, "sampler", "rollout"),
         # The most any sampler of the same physics could gain over the loop here.
         "rollout_vs_dm_control": rate["rollout"] / rate["dm_control"],
         # What the task's own logic leaves of dm_control's loop over this physics.
@@ -444,7 +545,8 @@ def _fastest_of(timers: dict[str, Any], repeats: int) -> dict[str, dict[str, Any
 
 def _print_record(record: dict[str, Any]) -> None:
     kind = record["kind"]
-    if kind == "steps":
+    if kind in ("steps", "vector") and "skipped" not in record:
+        where = record["domain"] if kind == "steps" else f"{record['domain']}/{record['task']}"
         real_time = f", {record['real_time_factor']:.0f}x real time" if "real_time_factor" in record else ""
         peer = f", {record['env_id']}" if "env_id" in record else ""
         spread = (
@@ -453,11 +555,12 @@ def _print_record(record: dict[str, Any]) -> None:
             else ""
         )
         print(
-            f"{record['domain']:>13} {record['path']:>16}: {record['steps_per_s']:>11,.0f} steps/s "
+            f"{where:>13} {record['path']:>16}: {record['steps_per_s']:>11,.0f} steps/s "
             f"({record['steps']} steps in {record['seconds']:.2f} s{real_time}{peer}{spread})"
         )
     elif "skipped" in record:
         where = f" for {record['domain']}" if "domain" in record else ""
+        where += f"/{record['task']}" if "task" in record else ""
         print(f"{kind}{where}: skipped ({record['skipped']})")
     elif kind == "fqi":
         print(
@@ -486,4 +589,12 @@ def _print_record(record: dict[str, Any]) -> None:
                 f" (median of each repeat's pair {figures['sampler_vs_rollout_paired']:.2f}){peer}; "
                 f"raw rollout {figures['rollout_vs_dm_control']:.1f}x dm_control; "
                 f"dm_control loop {figures['dm_control_vs_floor']:.2f}x dm_control's own floor"
+            )
+        for task, figures in record["vector"].items():
+            print(
+                f"{task}: native vector env ({record['vector_envs']} envs) "
+                f"{figures['vector_vs_rollout']:.2f}x raw rollout (median of each repeat's pair "
+                f"{figures['vector_vs_rollout_paired']:.2f}), {figures['vector_vs_sync_vector']:.1f}x SyncVectorEnv "
+                f"(paired {figures['vector_vs_sync_vector_paired']:.1f}; raw rollout itself "
+                f"{figures['rollout_vs_sync_vector']:.1f}x)"
             )

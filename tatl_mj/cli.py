@@ -1,7 +1,7 @@
 """The `tatl` command: list, run, plot, compare, reference, export, render, bench.
 
-The GL backend is chosen (``tatl_mj.gl``) before anything imports mujoco or
-dm_control, so every subcommand works on a headless machine.
+No GL library is loaded until a frame is drawn (``tatl_mj.gl``); `render` and
+`bench` check the backend first, so every subcommand works on a headless machine.
 """
 
 from __future__ import annotations
@@ -446,7 +446,7 @@ def _non_empty(text: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from tatl_mj import __version__  # imports neither mujoco nor dm_control
+    from tatl_mj import __version__
 
     parser = argparse.ArgumentParser(prog="tatl", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}", help="print the version")
@@ -517,7 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_render)
 
     p = sub.add_parser("bench", help="throughput of sampling paths, FQI and rendering")
-    from tatl_mj import bench  # imports neither mujoco nor dm_control
+    from tatl_mj import bench
 
     bench.add_arguments(p)
     p.set_defaults(func=_bench)
@@ -585,16 +585,12 @@ def main(argv: list[str] | None = None) -> int:
     from tatl_mj import gl
 
     if args.command in RENDERING_COMMANDS:
+        # Chosen and checked before any work, with a clear message; loaded at the first frame.
         try:
             gl.select_backend()
         except gl.GLBackendError as error:
             print(f"tatl {args.command}: {error}", file=sys.stderr)
             return 1
-    elif "mujoco" not in sys.modules:
-        # These commands never render: no GL library is needed, and a broken
-        # MUJOCO_GL setting must not stop them (worker processes inherit this).
-        os.environ["MUJOCO_GL"] = "disable"
-        os.environ.pop("PYOPENGL_PLATFORM", None)
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:

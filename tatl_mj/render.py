@@ -1,9 +1,7 @@
 """Headless clips of a policy acting in a tatl-mj task (optionally beside its source).
 
-Choose the GL backend first, then render and write:
+Render and write (the GL backend is chosen and loaded at the first frame, ``tatl_mj.gl``):
 
->>> from tatl_mj import gl
->>> gl.select_backend()                      # before mujoco / dm_control are imported
 >>> from tatl_mj import render, suite
 >>> env = suite.load("cartpole", "balance", task_kwargs={"random": 0})
 >>> frames = render.render_episode(env, policy, seconds=4, method_label="ta-tl")
@@ -14,7 +12,7 @@ How a clip is made
     drawn only when one is due (clip time ``k / fps``), showing the state after
     the last step at or before that time. Nothing here runs unless a clip is
     asked for, so simulation and training are never slowed by rendering.
-  - MuJoCo tasks are drawn with ``mujoco.Renderer`` from a camera of the model:
+  - MuJoCo tasks are drawn on a ``gl.Canvas`` (tatl-mj's own offscreen context) from a camera of the model:
     by default the one the task's domain declares (:func:`default_camera`, the
     ``CAMERA`` of its suite module: the bicycle from behind, where its roll
     shows; cart-pole, pendulum and mountain car side-on); a task without a
@@ -53,6 +51,7 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from tatl_mj import gl
 from tatl_mj.validation import integer, number
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -344,22 +343,21 @@ def _painter(
     if camera_id < 0:
         cameras = [model.id2name(i, "camera") for i in range(model.ncam)]
         raise ValueError(f"camera {camera!r} is not in the {_domain_name(env)} model; valid choices: {cameras}")
-    renderer = None
+    canvas = None
 
     def close() -> None:
-        if renderer is not None:
-            renderer.close()
+        if canvas is not None:
+            canvas.close()
 
     stack.callback(close)
 
     def paint() -> np.ndarray:
-        nonlocal renderer
+        nonlocal canvas
         # A task may recompile its model (e.g. new parameters per episode).
-        if renderer is None or renderer.model is not physics.model.ptr:
+        if canvas is None or canvas.model is not physics.model.ptr:
             close()
-            renderer = mujoco.Renderer(physics.model.ptr, height, width)
-        renderer.update_scene(physics.data.ptr, camera=camera_id)
-        return renderer.render()
+            canvas = gl.Canvas(physics.model.ptr, height, width)
+        return canvas.draw(physics.data.ptr, camera_id)
 
     def show(state: np.ndarray) -> np.ndarray:
         physics.set_state_vector(state)

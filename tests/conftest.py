@@ -1,6 +1,6 @@
 """Test-wide setup and shared helpers.
 
-Headless GL is chosen before mujoco or dm_control is imported. The helpers
+Frames drawn in the test process use EGL (set before the first one is drawn). The helpers
 (tiny specs, the ``tatl`` command in a subprocess) are imported by test modules
 as ``from conftest import ...``.
 """

@@ -15,11 +15,10 @@ from pathlib import Path
 
 import imageio.v2 as imageio_v2
 import imageio.v3 as imageio_v3
-import mujoco
 import numpy as np
 import pytest
 
-from tatl_mj import gl, render, suite
+from tatl_mj import render, suite
 from tatl_mj.suite import gridworld
 
 REPO = Path(__file__).resolve().parents[1]
@@ -126,66 +125,6 @@ def test_unset_backend_falls_back_to_osmesa_when_egl_is_missing(tmp_path):
     assert child.stdout.split() == ["osmesa", "osmesa"]
 
 
-def test_import_without_display_picks_a_headless_backend():
-    # mujoco/dm_control alone would pick GLFW here, warn about DISPLAY and fail to render.
-    env = _child_env()
-    for key in ("DISPLAY", "WAYLAND_DISPLAY", gl.DEFAULT_MARKER):
-        env.pop(key, None)
-    script = (
-        "import os; from tatl_mj import suite; e = suite.load('cartpole', 'balance'); e.reset(); "
-        "print(os.environ['MUJOCO_GL'], e.physics.render(24, 32).shape)"
-    )
-    child = subprocess.run(
-        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
-    )
-    assert child.returncode == 0, child.stderr
-    assert child.stdout.split() == ["egl", "(24,", "32,", "3)"]
-    assert "DISPLAY" not in child.stderr and "Traceback" not in child.stderr, child.stderr
-    # With a display, MUJOCO_GL is left to mujoco's own choice.
-    shown = subprocess.run(
-        [sys.executable, "-c", "import os, tatl_mj; print(os.environ.get('MUJOCO_GL'))"],
-        env={**env, "DISPLAY": ":0"},
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert shown.stdout.strip() == "None", shown.stderr
-
-
-def test_headless_default_is_still_probed_and_falls_back(tmp_path):
-    # The default is a guess from the library alone; select_backend treats it as
-    # unset, so a libEGL that does not load still ends on OSMesa.
-    env = _child_env(MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl", LD_LIBRARY_PATH=_fake_gl_libraries(tmp_path, "EGL"))
-    env[gl.DEFAULT_MARKER] = "egl"
-    script = "from tatl_mj import gl; print(gl.select_backend())"
-    child = subprocess.run(
-        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
-    )
-    assert child.returncode == 0, child.stderr
-    assert child.stdout.strip() == "osmesa"
-    env.pop(gl.DEFAULT_MARKER)  # the user's own MUJOCO_GL=egl is honoured, and fails clearly
-    child = subprocess.run(
-        [sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True, timeout=120
-    )
-    assert child.returncode != 0 and "cannot load libEGL" in child.stderr
-
-
-def test_select_backend_in_a_process_where_mujoco_is_imported():
-    # This process imported mujoco under conftest's backend: the choice is fixed.
-    current = os.environ["MUJOCO_GL"]
-    other = "osmesa" if current == "egl" else "egl"
-    environ = {"MUJOCO_GL": current, "PYOPENGL_PLATFORM": "wrong"}
-    assert gl.select_backend(environ) == current
-    assert environ["PYOPENGL_PLATFORM"] == current
-    with pytest.raises(gl.GLBackendError, match=f"already imported with the '{current}'"):
-        gl.select_backend({"MUJOCO_GL": other})
-    with pytest.raises(gl.GLBackendError, match="before anything imports mujoco"):
-        gl.select_backend({})
-    with pytest.raises(ValueError, match="MUJOCO_GL='Vulkan' is not a rendering backend"):
-        gl.select_backend({"MUJOCO_GL": "Vulkan"})
-
-
 # --- In-process rendering (EGL) -------------------------------------------------
 
 
@@ -253,10 +192,8 @@ def test_overlay_is_drawn_where_promised():
     env = _cartpole()
     plain = render.render_episode(env, _lqr_like, seconds=0.1, fps=10, camera="fixed")
     env = _cartpole()
-    with mujoco.Renderer(env.physics.model.ptr, 480, 640) as renderer:
-        env.reset()
-        renderer.update_scene(env.physics.data.ptr, camera="fixed")
-        raw = renderer.render()
+    env.reset()
+    raw = env.physics.render(480, 640, camera_id="fixed")
     differs = np.any(plain[0] != raw, axis=2)
     # Two small dark strips with text, at the top left and bottom left; nothing else.
     assert differs[5:26, :100].all() and differs[452:472, :60].all()
@@ -276,9 +213,7 @@ def test_side_by_side_shows_source_in_mapped_state():
     check = _cartpole(2)
     check.reset()
     check.physics.set_state_vector(-env.physics.state_vector())
-    with mujoco.Renderer(check.physics.model.ptr, 120, 160) as renderer:
-        renderer.update_scene(check.physics.data.ptr, camera="fixed")
-        expected = renderer.render()
+    expected = check.physics.render(120, 160, camera_id="fixed")
     right = frames[-1][:, 160:]
     body = slice(20, 90)  # between the label strips
     np.testing.assert_array_equal(right[body, 2:], expected[body, 2:])

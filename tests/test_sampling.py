@@ -777,6 +777,8 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
             "0",
             "--render-frames",
             "0",
+            "--vector-envs",
+            "3",
         ]
     )
     assert bench.run(args) == 0
@@ -804,7 +806,18 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
         assert summary["sampler_vs_gymnasium"] == pytest.approx(summary["sampler_steps_per_s"] / peer["steps_per_s"])
         assert summary["rollout_vs_gymnasium"] == pytest.approx(summary["rollout_steps_per_s"] / peer["steps_per_s"])
     assert summary["machine"]["mujoco"] and summary["memory_peak_mb"] > 0
+    if has_gymnasium:  # the vector envs of cartpole's one task, beside SyncVectorEnv and raw rollout
+        vector = {r["path"]: r for r in records if r["kind"] == "vector"}
+        assert set(vector) == {"vector", "sync_vector", "rollout"} and vector["vector"]["num_envs"] == 3
+        figures = summary["vector"]["cartpole/balance"]
+        assert figures["vector_vs_rollout"] == pytest.approx(
+            vector["vector"]["steps_per_s"] / vector["rollout"]["steps_per_s"]
+        )
+        assert figures["vector_vs_sync_vector"] == pytest.approx(
+            vector["vector"]["steps_per_s"] / vector["sync_vector"]["steps_per_s"]
+        )
     assert bench.run(parser.parse_args(["--domains", "cartpol"])) == 2
+    assert bench.run(parser.parse_args(["--vector-tasks", "cartpole/swing"])) == 2
     assert bench.run(parser.parse_args(["--repeats", "0"])) == 2
     assert "--repeats must be >= 1" in capsys.readouterr().out
 
@@ -834,6 +847,7 @@ def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch)
     assert bench.run(args) == 0
     out = capsys.readouterr().out
     assert "gymnasium for pendulum: skipped (gymnasium is not installed" in out
+    assert "vector for pendulum/swingup_timevarying: skipped (gymnasium is not installed" in out
     assert "pendulum          sampler" in out and "Gymnasium's loop" not in out
 
 

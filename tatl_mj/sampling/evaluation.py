@@ -14,7 +14,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from tatl_mj.sampling.checks import ValuePolicy, check_values
-from tatl_mj.sampling.simulator import SUBSTEPS, Simulator, episode_simulator, observed_state, simulator_for
+from tatl_mj.sampling.simulator import (
+    SUBSTEPS,
+    Simulator,
+    controls_each,
+    episode_simulator,
+    observed_state,
+    simulator_for,
+)
 from tatl_mj.validation import integer
 
 Joint = Callable[[list[int], list[np.ndarray]], list[np.ndarray]]
@@ -109,15 +116,9 @@ def _evaluate_batch(
         randoms = None
         if task_obj.control_noise:
             randoms = [r for _ in range(n_policies) for r in evaluation_randoms(seed, n_episodes)]
-        # Optional in the domain contract: each row's controls from its own stream at once.
-        controls_each = getattr(task_obj, "controls_each", None)
 
         def controls(values: np.ndarray, live: np.ndarray) -> np.ndarray:
-            if randoms is None:
-                return task_obj.controls(values, None)
-            if controls_each is not None:  # the same draws in one call
-                return controls_each(values, [randoms[i] for i in live])
-            return np.concatenate([task_obj.controls(values[j : j + 1], randoms[i]) for j, i in enumerate(live)])
+            return controls_each(task_obj, values, None if randoms is None else [randoms[i] for i in live])
 
         starts = task_obj.start_configurations(env.physics, n_episodes)
         return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit)

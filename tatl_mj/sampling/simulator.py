@@ -36,7 +36,6 @@ import collections
 import contextlib
 import contextvars
 import functools
-import inspect
 import weakref
 from typing import Any, Callable, Iterator
 
@@ -197,11 +196,7 @@ class Simulator:
 
     def time_limit(self) -> Any:
         """The task's ``time_limit`` argument: as given, else its factory's default."""
-        time_limit = self.kwargs.get("time_limit")
-        if time_limit is None:
-            factory = suite.domain(self.domain).TASKS[self.task_name]
-            time_limit = inspect.signature(factory).parameters["time_limit"].default
-        return time_limit
+        return suite.time_limit(self.domain, self.task_name, self.kwargs)
 
     def step_limit(self, max_episode_steps: int | None) -> float:
         """Steps after which an episode ends by time limit, as dm_control counts them.
@@ -345,6 +340,18 @@ class Table:
 
     def cell(self, timestep: dm_env.TimeStep) -> int:
         return int(self.cell_map.index(observed_state(timestep)[None])[0])
+
+
+def controls_each(task: Any, values: np.ndarray, randoms: list | None) -> np.ndarray:
+    """The control rows of action values ``values`` (N, m): row i draws the noise its controls
+    carry from ``randoms[i]``, the same numbers as ``task.controls(values[i:i + 1], randoms[i])``;
+    ``randoms`` None: noise-free controls, which draw nothing (one call for all rows)."""
+    if randoms is None:
+        return task.controls(values, None)
+    each = getattr(task, "controls_each", None)  # optional in the domain contract: all rows in one call
+    if each is not None:
+        return each(values, randoms)
+    return np.concatenate([task.controls(values[j : j + 1], r) for j, r in enumerate(randoms)])
 
 
 def _clear_warnings(batch: mujoco.batch.Batch, ids: np.ndarray) -> None:

@@ -126,6 +126,15 @@ def describe(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) 
     return _domain(domain).describe(task, **kwargs)
 
 
+def time_limit(domain: str, task: str, task_kwargs: dict[str, Any] | None = None) -> Any:
+    """``domain/task``'s time limit in seconds: ``task_kwargs["time_limit"]`` as given, else its
+    factory's default (``inf``: none)."""
+    given = (task_kwargs or {}).get("time_limit")
+    if given is not None:
+        return given
+    return inspect.signature(_factory(domain, task)).parameters["time_limit"].default
+
+
 def load(
     domain: str,
     task: str,

@@ -23,6 +23,8 @@ from dm_control.mujoco import engine, wrapper
 from dm_control.rl import control
 from dm_control.suite import base
 
+from tatl_mj import gl
+
 # tatl_mj/assets links to the repository's assets/ (and is a real folder in a wheel).
 MJCF_DIR = Path(__file__).resolve().parents[1] / "assets" / "mjcf"
 _COMMON_INCLUDES = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
@@ -146,6 +148,35 @@ class StatePhysics(engine.Physics):
         # speed servo) would then kick the system on the next step, and
         # mujoco.rollout, which computes it afresh, would not replay the episode.
         self.forward()
+
+    def render(self, height: int = 240, width: int = 320, camera_id: int | str = -1, **options: Any) -> np.ndarray:
+        """An RGB frame ``(height, width, 3)`` uint8 from camera ``camera_id`` (an id or a
+        name; -1 is the free camera), drawn on tatl-mj's own GL context (``tatl_mj.gl``,
+        whose backend is chosen and loaded at the first frame a process draws).
+
+        dm_control's own renderer stays off (``gl.import_simulators``), and with it its
+        other options (depth, segmentation, overlays, scene options).
+        """
+        if options:
+            raise ValueError(
+                f"physics.render takes height, width and camera_id; got {sorted(options)}, "
+                "dm_control options tatl-mj does not draw"
+            )
+        camera = self.model.name2id(camera_id, "camera") if isinstance(camera_id, str) else int(camera_id)
+        canvases = self.__dict__.setdefault("_canvases", {})
+        canvas = canvases.get((height, width))
+        if canvas is None or canvas.model is not self.model.ptr:  # a reloaded model gets a new one
+            canvas = canvases[height, width] = gl.Canvas(self.model.ptr, height, width)
+        return canvas.draw(self.data.ptr, camera)
+
+    def free_canvases(self) -> None:
+        """Frees the GL contexts ``render`` made (a later ``render`` makes new ones)."""
+        for canvas in self.__dict__.pop("_canvases", {}).values():
+            canvas.close()
+
+    def free(self) -> None:
+        self.free_canvases()
+        super().free()
 
     def state_vector(self) -> np.ndarray:
         return self.states_from(self.data.qpos[None], self.data.qvel[None])[0]

@@ -1,0 +1,132 @@
+"""Stable-Baselines3 over the native vector env: ``pip install 'tatl-mj[sb3]'``.
+
+>>> from stable_baselines3 import SAC
+>>> from stable_baselines3.common.vec_env import VecMonitor
+>>> from tatl_mj import sb3
+>>> envs = VecMonitor(sb3.vec_env("tatl_mj/PendulumSwingup-v2", num_envs=8))
+>>> SAC("MlpPolicy", envs).learn(3_000)
+
+SB3 cannot consume a Gymnasium ``VectorEnv``; :class:`Sb3VecEnv` is its
+``VecEnv`` over :class:`tatl_mj.vector.TatlVectorEnv`, so all N simulations
+step in one batched MuJoCo call. SB3's conventions, as its ``DummyVecEnv``
+gives them over ``gym.make`` envs (tested equal, bit for bit): an env whose
+episode ends is reset in the same step (``AutoresetMode.SAME_STEP``), its last
+observation in ``info["terminal_observation"]`` and
+``info["TimeLimit.truncated"]`` true where the time limit, not a terminal state,
+ended it; rewards are float32; ``seed(s)`` seeds env i with ``s + i`` at the
+next ``reset()``. The N envs are one batch, not N objects: ``get_attr``,
+``set_attr`` and ``env_method`` reach the vector env, once for every index
+asked. Wrap it in SB3's ``VecMonitor`` for episode statistics.
+
+Stable-Baselines3 and torch are optional (the ``sb3`` extra); nothing else in
+tatl-mj imports this module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+try:
+    from stable_baselines3.common.vec_env import VecEnv
+except ImportError as error:  # the optional extra
+    raise ImportError(f"tatl_mj.sb3 needs Stable-Baselines3: pip install 'tatl-mj[sb3]' ({error})") from None
+
+import gymnasium
+from gymnasium.vector import AutoresetMode
+
+from tatl_mj import gym as tatl_gym  # noqa: F401  (registers the ids)
+
+
+def vec_env(env_id: str, num_envs: int, **kwargs: Any) -> Sb3VecEnv:
+    """SB3's ``VecEnv`` of ``num_envs`` copies of ``env_id`` (a ``tatl_mj/...-v2`` id) in one batch;
+    ``kwargs`` go to ``gym.make_vec`` (``task_kwargs``, ``render_mode``, ``n_threads``, ...)."""
+    if "autoreset_mode" in kwargs:
+        raise ValueError("vec_env sets autoreset_mode itself (SB3 resets an ended env in the same step)")
+    envs = gymnasium.make_vec(
+        env_id,
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        **kwargs,
+    )
+    return Sb3VecEnv(envs)
+
+
+class Sb3VecEnv(VecEnv):
+    """SB3's ``VecEnv`` over a Gymnasium vector env with ``SAME_STEP`` autoreset (see the module docstring)."""
+
+    def __init__(self, envs: gymnasium.vector.VectorEnv) -> None:
+        mode = envs.metadata.get("autoreset_mode")
+        if mode is not AutoresetMode.SAME_STEP:
+            raise ValueError(f"envs must reset an ended env in the same step (AutoresetMode.SAME_STEP), got {mode}")
+        self.envs = envs
+        self._actions: np.ndarray | None = None
+        self._next_seeds: list[int | None] | None = None
+        self._next_options: dict[str, Any] | None = None
+        super().__init__(envs.num_envs, envs.single_observation_space, envs.single_action_space)
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seeds env i with ``seed + i`` at the next :meth:`reset`; returns those seeds."""
+        if seed is None:
+            return [None] * self.num_envs
+        self._next_seeds = [int(seed) + i for i in range(self.num_envs)]
+        return self._next_seeds
+
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """Options of the next :meth:`reset` (the vector env takes one dict for all envs)."""
+        if isinstance(options, list):
+            if any(o != options[0] for o in options):
+                raise ValueError("options must be the same for every env: they reset as one batch")
+            options = options[0] if options else None
+        self._next_options = options or None
+
+    def reset(self) -> np.ndarray:
+        observations, _ = self.envs.reset(seed=self._next_seeds, options=self._next_options)
+        self._next_seeds, self._next_options = None, None
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return observations
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        observations, rewards, terminated, truncated, info = self.envs.step(self._actions)
+        dones = terminated | truncated
+        cut = truncated & ~terminated  # ended by the time limit, not by a terminal state
+        infos: list[dict[str, Any]] = [{"TimeLimit.truncated": bool(c)} for c in cut]
+        for i in np.flatnonzero(dones):
+            infos[i]["terminal_observation"] = info["final_obs"][i]
+        if "diverged" in info:
+            for i in np.flatnonzero(info["_diverged"]):
+                infos[i]["diverged"] = info["diverged"][i]
+        return observations, rewards.astype(np.float32), dones, infos
+
+    def close(self) -> None:
+        self.envs.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        frames = self.envs.render()
+        return [None] * self.num_envs if frames is None else list(frames)
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self.envs, attr_name)] * self._count(indices)
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self.envs, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
+        result = getattr(self.envs, method_name)(*method_args, **method_kwargs)
+        return [result] * self._count(indices)
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        # The batched envs are simulations, not Gymnasium envs: no wrapper wraps one of them.
+        return [False] * self._count(indices)
+
+    def _count(self, indices: Any) -> int:
+        """How many envs ``indices`` (None: all, an int, or a sequence) names."""
+        if indices is None:
+            return self.num_envs
+        return 1 if isinstance(indices, (int, np.integer)) else len(list(indices))
