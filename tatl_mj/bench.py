@@ -469,6 +469,8 @@ def _time_domain(domain: str, task: str, args: argparse.Namespace, emit: Callabl
 def _time_vector(domain: str, task: str, args: argparse.Namespace, emit: Callable[[dict], None]) -> dict[str, float]:
     """Times one task's native vector env beside SyncVectorEnv and raw rollout; returns rates and ratios
     (empty, with a note emitted, without gymnasium)."""
+    from tatl_mj import sampling
+
     timed = functools.partial(time_vector_env, domain, task, args.seconds / 2, args.threads, args.vector_envs)
     probe = time_vector_env(domain, task, 0.0, args.threads, 1, "sync")  # is gymnasium there at all?
     if "skipped" in probe:
@@ -477,7 +479,7 @@ def _time_vector(domain: str, task: str, args: argparse.Namespace, emit: Callabl
     timers = {
         "vector": functools.partial(timed, "vector_entry_point"),
         "sync_vector": functools.partial(timed, "sync"),
-        "rollout": functools.partial(time_rollout, domain, task, args.seconds / 2, args.threads),
+        "rollout": functools.partial(sampling.time_rollout, domain, task, args.seconds / 2, args.threads),
     }
     figures = _fastest_of(timers, args.repeats)
     for path, record in figures.items():

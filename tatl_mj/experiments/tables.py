@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from tatl_mj.experiments import statistics as stats
 from tatl_mj.experiments import verdicts
 from tatl_mj.experiments.style import interval_text, method_label, order, samples_text, seed_range
 from tatl_mj.experiments.summary import (
@@ -325,9 +326,16 @@ def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
 # --- the headline tables --------------------------------------------------------------
 
 
-def verdict_table(summary: dict, prefix: str = "", roles: Sequence[str] = (verdicts.ABLATION, verdicts.PLACEBO)) -> str:
-    """One row per declared pair of the given roles whose method starts with ``prefix``, both questions:
-    the README's credit table (a variant's pairs that are its parent's are left out)."""
+def verdict_table(
+    summary: dict,
+    prefix: str = "",
+    roles: Sequence[str] = (verdicts.ABLATION, verdicts.PLACEBO),
+    methods: Sequence[str] | None = None,
+    credited_only: bool = False,
+) -> str:
+    """One row per declared pair of the given roles whose method starts with ``prefix`` (or is one of
+    ``methods``), both questions: the README's credit tables (a variant's pairs that are its
+    parent's are left out). ``credited_only``: only pairs credited (or better) on either question."""
     lines = [
         "| experiment | method | against | final: P [95% CI] | verdict | efficiency: P [95% CI] | verdict "
         "| efficiency, paper's accounting | normalised final score, method / against |",
@@ -337,6 +345,12 @@ def verdict_table(summary: dict, prefix: str = "", roles: Sequence[str] = (verdi
         title = exp["spec"].get("title", exp["spec"]["name"])
         for pair in exp.get("verdicts", []):
             if pair["role"] not in roles or pair.get("parents") or not pair["method"].startswith(prefix):
+                continue
+            if methods is not None and pair["method"] not in methods:
+                continue
+            if credited_only and not any(
+                (pair.get(q) or {}).get("verdict") == stats.CREDITED for q in verdicts.QUESTIONS
+            ):
                 continue
             words = BASELINE_WORDS if pair["role"] == verdicts.BEST_BASELINE else VERDICT_WORDS
             final_p, final_v = answer_text(pair.get("final"), words)

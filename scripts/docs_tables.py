@@ -1,0 +1,84 @@
+"""Writes the README's and the docs' result tables from the shipped reference sets, so a table and
+its data cannot drift apart; ``--check`` only says which block differs (CI runs it).
+
+    python scripts/docs_tables.py            # rewrite every generated block, and the figures
+    python scripts/docs_tables.py --check    # exit 1 naming each block that differs
+
+A generated block sits between ``<!-- begin: NAME -->`` and ``<!-- end: NAME -->``; everything
+outside the markers is written by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+from tatl_mj.experiments import credit_maps, figures, reference, tables
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER, SWEEPS = "paper-heldout", "sweeps-heldout"
+
+
+def blocks(paper: dict, sweeps: dict) -> dict[tuple[str, str], str]:
+    """(file, block name) -> the block's text."""
+    credit = "\n".join(tables.credit_table(name, cells) for name, cells in credit_maps.sweeps(sweeps).items())
+    return {
+        ("README.md", "paper-vs-here"): tables.paper_table(paper),
+        ("README.md", "credit"): tables.verdict_table(paper, methods=("ta-tl",)),
+        ("README.md", "credited-anywhere"): tables.verdict_table(paper, credited_only=True),
+        ("docs/results-paper.md", "results"): tables.table(paper) + "\n" + tables.aggregate_table(paper),
+        ("docs/credit.md", "credit-tables"): credit,
+    }
+
+
+def replace_block(text: str, name: str, body: str, where: str) -> str:
+    pattern = re.compile(rf"(<!-- begin: {re.escape(name)} -->\n).*?(\n<!-- end: {re.escape(name)} -->)", re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"{where}: no block '{name}' (<!-- begin: {name} --> ... <!-- end: {name} -->)")
+    return pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + m.group(2), text)
+
+
+def draw(run: Path, summary: dict, out: Path) -> None:
+    """The figures of an unpacked set into ``out`` (docs/figures)."""
+    for name, experiment in summary["experiments"].items():
+        if experiment.get("spec", {}).get("condition"):
+            continue
+        figures.figure(name, experiment, out / f"{name}.png")
+    if summary.get("aggregate") and not credit_maps.sweeps(summary):
+        figures.profile(summary, out / "performance_profile.png")
+    for name, cells in credit_maps.sweeps(summary).items():
+        credit_maps.credit_map(name, cells, out / f"credit_{name}.png")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="only compare; exit 1 if a block differs")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        summaries = {}
+        for name in (PAPER, SWEEPS):
+            run = Path(tmp) / name
+            summaries[name] = reference.unpack(reference.load(name), run)
+            if not args.check:
+                draw(run, summaries[name], ROOT / "docs" / "figures")
+    stale = []
+    for (file, name), body in blocks(summaries[PAPER], summaries[SWEEPS]).items():
+        path = ROOT / file
+        text = path.read_text()
+        new = replace_block(text, name, body, file)
+        if new != text:
+            stale.append(f"{file}: block '{name}'")
+            if not args.check:
+                path.write_text(new)
+    if args.check and stale:
+        print("out of date with the reference sets (run python scripts/docs_tables.py):", file=sys.stderr)
+        print("\n".join(f"  {s}" for s in stale), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
