@@ -401,7 +401,7 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
     for question, baseline in spec.best_baseline.items():
         if question not in ("final", "efficiency"):
             raise SpecError(f"{p}: unknown key 'best_baseline.{question}'; valid keys: ['efficiency', 'final']")
-        if baseline not in spec.methods:
+        if not isinstance(baseline, str) or baseline not in spec.methods:
             _fail(p, f"best_baseline.{question}", f"a method of this spec {sorted(spec.methods)}", baseline)
 
 
