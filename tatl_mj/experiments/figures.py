@@ -127,7 +127,10 @@ def _iqm_panel(ax: Any, experiment: dict, methods: list[str], colors: dict[str, 
         drawn += [*value, *low[np.isfinite(low)], *high[np.isfinite(high)]]
         handles.append(Line2D([], [], color=colors[method], lw=2, ls=LINE_STYLES[i % len(LINE_STYLES)],
                               marker=MARKERS[i % len(MARKERS)], ms=5, label=method_label(method)))  # fmt: skip
-    limits = axis_limits(drawn, [0.0, 1.0])
+    low, high = axis_limits(drawn, [0.0, 1.0])
+    # Below the efficiency area's floor a score says only "worse than random by the reference's
+    # margin": such points are drawn on the edge, so blow-ups do not squash the rest.
+    limits = (max(low, verdicts.SCORE_FLOOR - 0.05), high)
     clipped = 0
     # Methods with the fewest distinct points on top, so a curve collapsed onto one point stays visible.
     for i, method, x, value, low, high in sorted(curves, key=lambda c: -len(set(zip(c[2], c[3])))):
@@ -233,13 +236,17 @@ def interval_figure(name: str, experiment: dict, path: str | Path) -> Path:
         "interval lies above 0.5, worse when below; a variant's pairs that are its parent's records are left out."
     )
     caption = "\n".join(textwrap.wrap(caption, width=200))
-    height = 5.0 + 0.22 * legend_rows + 0.5 + 0.12 * max(0, pairs - 6)
+    # Inches from the bottom: the caption, then the legend above it, then the panels, which
+    # grow with panel (c)'s rows (two lines of label each).
+    caption_top = 0.1 + 0.15 * (caption.count("\n") + 1)
+    block = caption_top + 0.1 + 0.2 * legend_rows + 0.55
+    height = block + max(4.6, 0.3 * pairs + 0.8)
+    height += 0.3  # the suptitle above the panels' titles
     fig.set_size_inches(17, height)
-    block = 0.6 + 0.22 * legend_rows + 0.4
-    fig.subplots_adjust(left=0.05, right=0.9, top=1 - 0.5 / height, bottom=block / height, wspace=0.42)
+    fig.subplots_adjust(left=0.05, right=0.9, top=1 - 0.8 / height, bottom=block / height, wspace=0.42)
     fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=7.5, frameon=False,
-               bbox_to_anchor=(0.5, 0.42 / height))  # fmt: skip
-    fig.text(0.05, 0.08 / height, caption, fontsize=7.5, va="bottom", ha="left")
+               bbox_to_anchor=(0.5, (caption_top + 0.05) / height))  # fmt: skip
+    fig.text(0.05, 0.1 / height, caption, fontsize=7.5, va="bottom", ha="left")
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -97,7 +97,7 @@ def seed_note(comparison: Comparison) -> str:
 
 
 def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
-    """One experiment's heading, method table, verdicts and footnote."""
+    """One experiment's heading, verdicts, method table and footnote."""
     methods = sorted(exp["methods"], key=order)
     # Methods the experiment's own spec lists but that finished no seed are flagged;
     # other experiments' methods are not this one's business.
@@ -116,12 +116,13 @@ def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
         return lines + ["**No seed was finished by every method: nothing to compare.**", ""]
     if not comparison.meaningful:
         lines += [_no_threshold_sentence(comparison), ""]
-    lines += _method_rows(exp, comparison)
+    # The verdicts first, then the methods' numbers they rest on.
     if "verdicts" in exp:
-        lines += _verdict_rows(exp)
+        lines += _verdict_rows(exp)[1:] + [""]
     elif ablation_sentences(exp, comparison):  # no reference return: a sentence per ablation from the returns
-        lines += ["", "Transfer against its ablation without the source:", ""]
-        lines += [f"- {v}" for v in ablation_sentences(exp, comparison)]
+        lines += ["Transfer against its ablation without the source:", ""]
+        lines += [f"- {v}" for v in ablation_sentences(exp, comparison)] + [""]
+    lines += _method_rows(exp, comparison)
     lines += _capped_lines(exp)
     return lines + _footnote(summary, exp, comparison)
 
@@ -129,9 +130,7 @@ def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
 def _method_rows(exp: dict, comparison: Comparison) -> list[str]:
     """The method table: one row per compared method."""
     stats_on = any("efficiency" in exp["methods"][r.method] for r in comparison.methods)
-    header = (
-        "| method | data | final return: mean ± sd (median) | transitions to threshold, counted: median (per seed) "
-    )
+    header = "| method | data | final return: mean ± sd (median) | transitions to threshold, counted: median (seeds) "
     header += "| paper's accounting: median "
     if stats_on:
         header += (
@@ -144,11 +143,10 @@ def _method_rows(exp: dict, comparison: Comparison) -> list[str]:
         finals = np.asarray(r.final_returns)
         final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
         if comparison.meaningful:
-            per_seed = ", ".join(samples_text(v) for v in r.samples_to_threshold)
             first = min(data["curve"]["samples"])
             left = sum(1 for v in r.samples_to_threshold if math.isfinite(v) and v <= first)
-            censored = f"; {left} at the smallest budget (left-censored)" if left else ""
-            counted = f"{samples_text(r.median_samples)} ({per_seed}; {r.reached}/{len(r.seeds)} reached{censored})"
+            censored = f", {left} at the smallest budget" if left else ""
+            counted = f"{samples_text(r.median_samples)} ({r.reached}/{len(r.seeds)} reached{censored})"
             paper = samples_text(r.median_samples_paper)
         else:
             counted, paper = "no meaningful threshold", "n/a"
