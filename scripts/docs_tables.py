@@ -28,17 +28,18 @@ def blocks(paper: dict, sweeps: dict) -> dict[tuple[str, str], str]:
     return {
         ("README.md", "paper-vs-here"): tables.paper_table(paper),
         ("README.md", "credit"): tables.verdict_table(paper, methods=("ta-tl",)),
-        ("README.md", "credited-anywhere"): tables.verdict_table(paper, credited_only=True),
+        ("docs/results-paper.md", "credited-anywhere"): tables.verdict_table(paper, credited_only=True),
         ("docs/results-paper.md", "results"): tables.table(paper) + "\n" + tables.aggregate_table(paper),
         ("docs/credit.md", "credit-tables"): credit,
     }
 
 
 def replace_block(text: str, name: str, body: str, where: str) -> str:
-    pattern = re.compile(rf"(<!-- begin: {re.escape(name)} -->\n).*?(\n<!-- end: {re.escape(name)} -->)", re.S)
+    # An empty block is the two markers on consecutive lines.
+    pattern = re.compile(rf"(<!-- begin: {re.escape(name)} -->\n)(?:.*?\n)?(<!-- end: {re.escape(name)} -->)", re.S)
     if not pattern.search(text):
         raise SystemExit(f"{where}: no block '{name}' (<!-- begin: {name} --> ... <!-- end: {name} -->)")
-    return pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + m.group(2), text)
+    return pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
 
 
 def draw(run: Path, summary: dict, out: Path) -> None:

@@ -125,7 +125,7 @@ def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> P
         _heat_map(fig, ax_s, cells, params, lambda exp: final(exp, focus_method), "viridis", (None, None))
     pair_text = f"{pairs[0][1]} > {pairs[0][2]}" if pairs and len(params) == 2 else "method > its ablation or placebo"
     on = "efficiency" if len(params) == 2 else "final (circles), efficiency (squares)"
-    ax_p.set_title(f"(a) paired P({pair_text}) on a seed, {on}, 95% CI", fontsize=10)
+    ax_p.set_title(f"(a) paired P({pair_text}) on a seed,\n{on}, 95% CI", fontsize=10)
     focus = f" of {pairs[0][1] if pairs else methods[0]}" if methods and len(params) == 2 else ""
     spread = "95% CI" if len(params) == 2 else "95% band"
     ax_s.set_title(f"(b) normalised final score{focus}: IQM over seeds, {spread}", fontsize=10)
