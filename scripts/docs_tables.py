@@ -42,15 +42,16 @@ def replace_block(text: str, name: str, body: str, where: str) -> str:
     return pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
 
 
-def draw(run: Path, summary: dict, out: Path) -> None:
+def draw(summary: dict, out: Path) -> None:
     """The figures of an unpacked set into ``out`` (docs/figures)."""
     for name, experiment in summary["experiments"].items():
         if experiment.get("spec", {}).get("condition"):
             continue
         figures.figure(name, experiment, out / f"{name}.png")
-    if summary.get("aggregate") and not credit_maps.sweeps(summary):
+    maps = credit_maps.sweeps(summary)
+    if summary.get("aggregate") and not maps:
         figures.profile(summary, out / "performance_profile.png")
-    for name, cells in credit_maps.sweeps(summary).items():
+    for name, cells in maps.items():
         credit_maps.credit_map(name, cells, out / f"credit_{name}.png")
 
 
@@ -61,10 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         summaries = {}
         for name in (PAPER, SWEEPS):
-            run = Path(tmp) / name
-            summaries[name] = reference.unpack(reference.load(name), run)
+            summaries[name] = reference.unpack(reference.load(name), Path(tmp) / name)
             if not args.check:
-                draw(run, summaries[name], ROOT / "docs" / "figures")
+                draw(summaries[name], ROOT / "docs" / "figures")
     stale = []
     for (file, name), body in blocks(summaries[PAPER], summaries[SWEEPS]).items():
         path = ROOT / file

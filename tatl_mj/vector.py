@@ -49,7 +49,7 @@ from gymnasium.vector.utils import batch_space
 
 from tatl_mj import gym as tatl_gym
 from tatl_mj import suite
-from tatl_mj.sampling.simulator import controls_each, simulator_for
+from tatl_mj.sampling.simulator import controls_each, episode_simulator
 from tatl_mj.validation import integer
 
 AUTORESET_MODES: tuple[AutoresetMode, ...] = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
@@ -82,8 +82,6 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         tatl_gym.check_physics_task(domain, task)
         tatl_gym.check_render_mode(render_mode)
         self.num_envs = integer("", "num_envs", num_envs, 1)
-        if max_episode_steps is not None:
-            integer("", "max_episode_steps", max_episode_steps, 1)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         kwargs = dict(task_kwargs or {})
         random = kwargs.pop("random", None)
@@ -92,23 +90,25 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
                 f"task_kwargs['random'] must be None or an integer seed (every env starts from it, "
                 f"as make_vec's single envs would; or seed through reset(seed=...)), got {random!r}"
             )
-        self._sim = simulator_for(domain, task, kwargs, n_threads)
+        self._sim = episode_simulator(domain, task, kwargs, n_threads, max_episode_steps)
         if not self._sim.batched_queries:
             raise ValueError(
                 f"{domain}/{task} changes its model during an episode in a way that depends on more than the "
                 "step (no model_for_step): it has no batched vector env; use vectorization_mode='sync'"
             )
-        # One environment per simulation: its task's random state is that env's own.
-        self._envs = [suite.load(domain, task, task_kwargs={**kwargs, "random": random}) for _ in range(self.num_envs)]
-        self._task = self._envs[0].task
+        # One environment for the task's rules and a scratch physics; each simulation keeps its own
+        # random stream, as its single env's task would (dm_control seeds a task with RandomState).
+        self._env = suite.load(domain, task, task_kwargs={**kwargs, "random": random})
+        self._randoms = [np.random.RandomState(random) for _ in range(self.num_envs)]
+        self._task = self._env.task
         self._noisy = bool(self._task.control_noise)
 
-        limit = tatl_gym.actuator_limit(self._envs[0], f"{domain}/{task}")
+        limit = tatl_gym.actuator_limit(self._env, f"{domain}/{task}")
         self.single_action_space, self._scale = tatl_gym.action_space(limit, normalize_actions)
         self.single_observation_space = tatl_gym.observation_space(self._sim.physics.STATE_SIZE)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        control_timestep = self._envs[0].control_timestep()
+        control_timestep = self._env.control_timestep()
         self.metadata = {
             **type(self).metadata,
             "render_fps": int(round(1.0 / control_timestep)),
@@ -118,16 +118,18 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         self._frame_size = (height, width)
         self._camera = tatl_gym.default_camera(domain, camera)
         self._canvas: Any = None
+        self._camera_id = -1
+        self._render_model: Any = None
 
         # Episodes end by time limit after the task's steps or max_episode_steps, the fewer.
-        self._task_steps = tatl_gym.episode_steps(self._envs[0], domain, task, kwargs) or np.inf
+        self._task_steps = tatl_gym.episode_steps(self._env, domain, task, kwargs) or np.inf
         self._limit = min(self._task_steps, max_episode_steps or np.inf)
         self._batch = self._sim.new_batch(self.num_envs)
         # A model per step of an episode (model_for_step): per-simulation fields of the batch.
         if self._sim.fast:
             self._schedule = None
         else:
-            self._schedule = StepModels(self._task, self._envs[0].physics, self._batch, self._limit)
+            self._schedule = StepModels(self._task, self._env.physics, self._batch, self._limit)
         self._all = np.arange(self.num_envs)
         self._states = np.zeros((self.num_envs, self._sim.physics.STATE_SIZE))
         self._steps = np.zeros(self.num_envs, np.int64)
@@ -153,7 +155,7 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         super().reset(seed=seeds[0] if isinstance(seed, (int, np.integer)) else None)
         for i in ids:
             if seeds[i] is not None:
-                self._envs[i].task.random.seed(seeds[i])
+                self._randoms[i].seed(seeds[i])
         self._start(ids)
         self._started = True
         return self._states.copy(), {}
@@ -173,7 +175,7 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
             self._start(self._all[resetting])  # NEXT_STEP: these only start their next episode
         if len(ids):
             steps = self._steps[ids]
-            randoms = [self._envs[i].task.random for i in ids] if self._noisy else None
+            randoms = [self._randoms[i] for i in ids] if self._noisy else None
             controls = controls_each(self._task, values[ids], randoms)
             if self._schedule is not None:
                 self._schedule.set(self._steps)
@@ -216,9 +218,11 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         height, width = self._frame_size
         if self._canvas is None:
             self._canvas = gl.Canvas(self._sim.model, height, width)
-        camera = self._sim.physics.model.name2id(self._camera, "camera")
-        data = self._envs[0].physics.data.ptr  # scratch: the envs' own physics are never stepped
-        model = None if self._schedule is None else copy.copy(self._sim.model)
+            self._camera_id = self._sim.physics.model.name2id(self._camera, "camera")
+            # Scratch for each env's step model; copied once, as a model copy carries its textures.
+            self._render_model = None if self._schedule is None else copy.copy(self._sim.model)
+        camera, model = self._camera_id, self._render_model
+        data = self._env.physics.data.ptr  # scratch: the env's own physics is never stepped
         if self._schedule is not None:  # the model of each env's last step, as the single env shows
             self._schedule.set(np.maximum(self._steps - 1, 0))
         frames = []
@@ -236,10 +240,13 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
             self._canvas = None
 
     def _start(self, ids: np.ndarray) -> None:
-        """Starts the next episode of envs ``ids``, each drawn from its own task's random state."""
+        """Starts the next episode of envs ``ids``, each drawn from its own random stream (lent to
+        the task for the draw, then taken back)."""
+        shared = self._env.task.random
         for i in ids:
-            env = self._envs[i]
-            self._states[i] = self._sim.start_episodes(self._batch, np.array([i]), env)[0]
+            shared.set_state(self._randoms[i].get_state())
+            self._states[i] = self._sim.start_episodes(self._batch, np.array([i]), self._env)[0]
+            self._randoms[i].set_state(shared.get_state())
         self._steps[ids] = 0
         self._autoreset[ids] = False
 

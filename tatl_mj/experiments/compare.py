@@ -43,8 +43,9 @@ from tatl_mj.experiments import summary as summary_mod
 from tatl_mj.experiments.records import SCHEMA_VERSION, SOURCE_UNIT, RunDirectory, read_json, read_record, write_json
 from tatl_mj.experiments.reference import ReferenceSet
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, content_hash, dynamics_versions, spec_to_dict
+from tatl_mj.transfer import roles
 
-PAIR_KINDS = ("ablation", "placebo")
+PAIR_KINDS = roles.PAIR_KEYS
 COMPARISON = "compare.json"  # in --out: the reference it was compared against, and the user's methods
 COSTS = (
     "wall_s",
@@ -216,7 +217,7 @@ def _check_pairs(
 def _with_renamed(spec: ExperimentSpec, renamed: dict[str, str]) -> ExperimentSpec:
     """``spec`` with a variant table per renamed method: its base's settings under the new name.
     Only the run sees it; the spec was checked against the reference as it was given."""
-    tables = {new: {"method": base, **spec.methods[base]} for new, base in renamed.items()}
+    tables = {new: {roles.VARIANT_KEY: base, **spec.methods[base]} for new, base in renamed.items()}
     return dataclasses.replace(spec, methods={**spec.methods, **tables}) if tables else spec
 
 
@@ -335,7 +336,7 @@ def run(
 
 def _summary_spec(spec: ExperimentSpec, planned: Plan) -> dict:
     """The spec as the summary reads it, with a method table for each of the user's methods that
-    carries its declared pairs (``registry.PAIR_KEYS``), so that the verdict rule pairs them as
+    carries its declared pairs (``roles.PAIR_KEYS``), so that the verdict rule pairs them as
     it pairs the spec's own (``verdicts.declared_pairs``) and compares them with the spec's
     frozen best baseline. The spec itself, as checked against the reference, is unchanged."""
     table = spec_to_dict(spec)

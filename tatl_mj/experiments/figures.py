@@ -319,11 +319,8 @@ def _seed_curves(experiment: dict, results: Sequence[MethodResult]) -> dict[str,
     for r in results:
         data = experiment["methods"][r.method]
         rows = [data["seeds"].index(s) for s in r.seeds]
-        budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
-        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)
-        # Each seed at the target transitions it counted; a reference that counts none at its budget.
         curves[r.method] = (
-            np.where(counted[rows] > 0, counted[rows], budgets),
+            counts_of(data, "counted")[rows],
             np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows],
         )
     return curves

@@ -46,7 +46,7 @@ from tatl_mj.experiments.records import (
     write_atomic,
     write_json,
 )
-from tatl_mj.experiments.spec import ExperimentSpec, conditions, dynamics_versions, spec_to_dict
+from tatl_mj.experiments.spec import NOT_CONTENT, ExperimentSpec, conditions, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import fit_time, registry
 from tatl_mj.transfer.method import contract
 
@@ -220,7 +220,7 @@ def _plan(
 
 # What a method unit's record may depend on besides its method and seed: everything in
 # its spec but the experiment's names, its mapping and its other methods.
-_NOT_SHARED = ("name", "title", "paper_claim", "paper", "best_baseline", "path", "mapping", "methods", "streams")
+_NOT_SHARED = (*NOT_CONTENT, "name", "mapping", "methods", "streams")
 
 
 def _experiment_key(spec: ExperimentSpec, preset: str) -> list:
@@ -400,7 +400,7 @@ def _run_locked(
     inputs = dict(specs=[spec_to_dict(s) for s in specs], preset=preset, seeds=seeds, methods=method_names)
     extra = dict(wall_s=time.perf_counter() - start, failures=recorder.failures, **settings)
     ran = bool(jobs) or recorder.copied
-    summary = None if ran else _unchanged_summary(run_dir, inputs, all_units)
+    summary = None if ran else _unchanged_summary(run_dir, inputs, len(recorder.done) == len(all_units))
     if summary is None:
         summary = summary_mod.build(
             run_dir, **inputs, versions=_versions(), kernels=_kernel_counts(run_dir, all_units), **extra
@@ -413,7 +413,7 @@ def _run_locked(
     return summary
 
 
-def _unchanged_summary(run_dir: RunDirectory, inputs: dict, all_units: list[Unit]) -> dict | None:
+def _unchanged_summary(run_dir: RunDirectory, inputs: dict, all_done: bool) -> dict | None:
     """The folder's summary.json when a rerun in which no unit ran would write the same one: the
     same specs, preset, seeds and methods, verdict rule and record schema, and every unit done.
     Its statistics (bootstrap intervals) are then not computed again."""
@@ -430,7 +430,7 @@ def _unchanged_summary(run_dir: RunDirectory, inputs: dict, all_units: list[Unit
         and [old.get("experiments", {}).get(s["name"], {}).get("spec") for s in inputs["specs"]] == inputs["specs"]
         and all(old.get(key) == value for key, value in inputs.items() if key != "specs")
         and len(old.get("experiments", {})) == len(inputs["specs"])
-        and all(run_dir.is_done(u.experiment, u.seed, u.name) for u in all_units)
+        and all_done  # validated when the run began
     )
     return old if same else None
 
@@ -482,7 +482,7 @@ class Scheduler:
         jobs = [self._job(u, None) for u in sources if u not in done | waiting_sources]
         for source in sources:
             if source in done:
-                jobs += self._methods_of(source) + self._sources_after(source)
+                jobs += self._unlocked(source)
         return jobs
 
     def then(self, unit: Unit, result: dict) -> list[executors.Job]:
@@ -493,24 +493,25 @@ class Scheduler:
                 self.recorder.copy(unit, alias)
             else:
                 self.recorder.skip(alias, f"the unit it shares, {unit}, did not finish")
-        return self._methods_of(unit) + self._sources_after(unit) if unit.name == SOURCE_UNIT else []
+        return self._unlocked(unit) if unit.name == SOURCE_UNIT else []
 
     def _job(self, unit: Unit, blob: bytes | None) -> executors.Job:
         args = (self.by_name[unit.experiment], self.preset, unit, blob)
         return unit, args if unit.name == SOURCE_UNIT else (*args, self.custom.get(unit.name))
 
-    def _methods_of(self, source: Unit) -> list[executors.Job]:
+    def _unlocked(self, source: Unit) -> list[executors.Job]:
+        """The jobs waiting for ``source``: its method units (skipped if it failed), then the source
+        units waiting for its artefacts (computed alone if it failed); its blob is read once, and
+        only when a job needs it."""
         units = self.waiting.pop((source.experiment, source.seed), [])
+        later = self.later_sources.get(source, [])
         if source not in self.recorder.done:
             for unit in units:
                 self.recorder.skip(unit, "its source unit failed")
                 for alias in self.copies.get(unit, []):
                     self.recorder.skip(alias, f"the unit it shares, {unit}, did not finish")
+            return [self._job(u, None) for u in later]
+        if not units and not later:
             return []
-        blob = self.run_dir.read_blob(source.experiment, source.seed) if units else None
-        return [self._job(u, blob) for u in units]
-
-    def _sources_after(self, origin: Unit) -> list[executors.Job]:
-        """The source units waiting for ``origin``'s artefacts (computed alone if it failed)."""
-        blob = self.run_dir.read_blob(origin.experiment, origin.seed) if origin in self.recorder.done else None
-        return [self._job(u, blob) for u in self.later_sources.get(origin, [])]
+        blob = self.run_dir.read_blob(source.experiment, source.seed)
+        return [self._job(u, blob) for u in units + later]

@@ -498,9 +498,10 @@ def _statistics(experiment: dict, spec: dict) -> None:
             continue
         rows = [data["seeds"].index(s) for s in seeds]
         scores = stats.normalised(np.asarray(data["curve"]["mean_return"])[rows], randoms[:, None], reference)
-        counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)[rows]
-        rollouts = np.asarray(data["curve"]["rollout_transitions"], dtype=np.float64)[rows]
-        accountings = {"counted": counted, "paper": counted - rollouts}
+        accountings = {
+            "counted": np.asarray(_counted(data["curve"]), dtype=np.float64)[rows],
+            "paper": np.asarray(_paper(data["curve"]), dtype=np.float64)[rows],
+        }
         for key, counts in accountings.items():
             # A reference learns nothing from the target: its policy stands from the first budget.
             accountings[key] = np.where(counts > 0, counts, budgets[0])

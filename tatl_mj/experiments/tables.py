@@ -118,10 +118,10 @@ def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
         lines += [_no_threshold_sentence(comparison), ""]
     # The verdicts first, then the methods' numbers they rest on.
     if "verdicts" in exp:
-        lines += _verdict_rows(exp)[1:] + [""]
-    elif ablation_sentences(exp, comparison):  # no reference return: a sentence per ablation from the returns
+        lines += _verdict_rows(exp) + [""]
+    elif sentences := ablation_sentences(exp, comparison):  # no reference return: a sentence per ablation
         lines += ["Transfer against its ablation without the source:", ""]
-        lines += [f"- {v}" for v in ablation_sentences(exp, comparison)] + [""]
+        lines += [f"- {v}" for v in sentences] + [""]
     lines += _method_rows(exp, comparison)
     lines += _capped_lines(exp)
     return lines + _footnote(summary, exp, comparison)
@@ -178,10 +178,9 @@ def _verdict_rows(exp: dict) -> list[str]:
     """The verdicts of the declared pairs, both questions each."""
     pairs = exp.get("verdicts") or []
     if not pairs:
-        return ["", "No declared pair has both of its methods here: no verdict."]
+        return ["No declared pair has both of its methods here: no verdict."]
     families = exp.get("families") or {}
     lines = [
-        "",
         f"Verdicts (P = (better + tied / 2) / seeds, seeds better/tied/worse in brackets; the family holds "
         f"{families.get('final', '?')} pairs asking *final* and {families.get('efficiency', '?')} asking "
         f"*efficiency*; intervals unadjusted, {HOLM_MARK} where Holm's correction keeps the verdict):",
@@ -191,10 +190,7 @@ def _verdict_rows(exp: dict) -> list[str]:
         "|---|---|---|---|---|---|---|---|",
     ]
     for pair in pairs:
-        words = BASELINE_WORDS if pair["role"] == verdicts.BEST_BASELINE else VERDICT_WORDS
-        final_p, final_v = answer_text(pair.get("final"), words)
-        efficiency_p, efficiency_v = answer_text(pair.get("efficiency"), words)
-        paper_v = answer_text(pair.get("efficiency_paper"), words)[1].rstrip(HOLM_MARK)
+        final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
         difference = (
             interval_text((pair.get("final") or {}).get("median_difference"), "+.2f") if "final" in pair else "-"
         )
@@ -324,6 +320,16 @@ def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
 # --- the headline tables --------------------------------------------------------------
 
 
+def _answer_cells(pair: dict) -> tuple[str, str, str, str, str]:
+    """A pair's final P and verdict, efficiency P and verdict, and the paper-accounting verdict
+    (without the Holm mark: that question is not in the family)."""
+    words = BASELINE_WORDS if pair["role"] == verdicts.BEST_BASELINE else VERDICT_WORDS
+    final_p, final_v = answer_text(pair.get("final"), words)
+    efficiency_p, efficiency_v = answer_text(pair.get("efficiency"), words)
+    paper_v = answer_text(pair.get("efficiency_paper"), words)[1].rstrip(HOLM_MARK)
+    return final_p, final_v, efficiency_p, efficiency_v, paper_v
+
+
 def verdict_table(
     summary: dict,
     prefix: str = "",
@@ -350,10 +356,7 @@ def verdict_table(
                 (pair.get(q) or {}).get("verdict") == stats.CREDITED for q in verdicts.QUESTIONS
             ):
                 continue
-            words = BASELINE_WORDS if pair["role"] == verdicts.BEST_BASELINE else VERDICT_WORDS
-            final_p, final_v = answer_text(pair.get("final"), words)
-            efficiency_p, efficiency_v = answer_text(pair.get("efficiency"), words)
-            paper_v = answer_text(pair.get("efficiency_paper"), words)[1].rstrip(HOLM_MARK)
+            final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
             mine, theirs = (exp["methods"][m].get("final_iqm") for m in (pair["method"], pair["other"]))
             lines.append(
                 f"| {title} | `{pair['method']}` | `{pair['other']}` ({ROLE_WORDS[pair['role']]}) | {final_p} "

@@ -248,20 +248,6 @@ def judge(
     return out
 
 
-def counts(pairs: Sequence[dict]) -> dict[str, dict[str, int]]:
-    """Per question and role, how many of an experiment's own pairs (its parent's left out) got
-    each verdict: ``{"final": {"ablation credited": 1, ...}, ...}``."""
-    out: dict[str, dict[str, int]] = {q: {} for q in QUESTIONS}
-    for entry in pairs:
-        if entry.get("parents"):
-            continue
-        for question in QUESTIONS:
-            if question in entry:
-                key = f"{entry['role']} {entry[question]['verdict']}"
-                out[question][key] = out[question].get(key, 0) + 1
-    return out
-
-
 def choose_best_baseline(experiment: Mapping[str, Any], baselines: Sequence[str]) -> dict[str, str]:
     """Per question, the baseline with the highest IQM of that question's per-seed statistic in a
     summary experiment (``final_iqm`` and ``efficiency``): run on the tuning seeds, then frozen
@@ -292,7 +278,6 @@ __all__ = [
     "answer",
     "best_baseline_pairs",
     "choose_best_baseline",
-    "counts",
     "declared_pairs",
     "family_sizes",
     "judge",

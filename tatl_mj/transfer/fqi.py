@@ -515,9 +515,10 @@ def _fqi_trees(
     continues = gamma * (~t.absorbing)
     q: QFunction = q0 if prior is None else prior
     taken = 0.0 if prior is None else prior.values(t.states)[np.arange(len(t)), t.actions]
+    from sklearn import ensemble  # scikit-learn takes seconds to import: only where trees are grown
+
     for _ in range(iterations):
         y = t.rewards + continues * q.values(t.next_states).max(axis=1) - taken
-        from sklearn import ensemble  # scikit-learn takes seconds to import: only where trees are grown
 
         forest = ensemble.ExtraTreesRegressor(
             n_estimators=reg.n_estimators,
