@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from tatl_mj.experiments import verdicts
+from tatl_mj.experiments.results import verdicts
 from tatl_mj.transfer import roles
 
 if __name__ == "__main__":

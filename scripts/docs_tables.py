@@ -16,7 +16,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tatl_mj.experiments import credit_maps, figures, reference, tables
+from tatl_mj.experiments.report import credit_maps, figures, tables
+from tatl_mj.experiments.results import reference
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER, SWEEPS = "paper-heldout", "sweeps-heldout"

@@ -17,8 +17,8 @@ import sys
 
 import numpy as np
 
-from tatl_mj.experiments import pipeline
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.run import pipeline
 from tatl_mj.transfer.methods.target_fqi import RL
 
 SAMPLES = 50_000

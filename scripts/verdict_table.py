@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from tatl_mj.experiments.tables import verdict_table
+from tatl_mj.experiments.report.tables import verdict_table
 
 if __name__ == "__main__":
     prefix = sys.argv[2] if len(sys.argv) > 2 else ""

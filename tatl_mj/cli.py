@@ -49,7 +49,7 @@ class Interrupted(BaseException):
 
 
 def _interrupt(signum: int, frame: object) -> None:
-    from tatl_mj.experiments import workers
+    from tatl_mj.experiments.run import workers
 
     # Stop the workers first: a pool's shutdown would otherwise wait for every running unit.
     workers.stop_children()
@@ -143,7 +143,8 @@ def _stopped(command: str, stop: Interrupted, out: str) -> int:
 def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict | None) -> tuple[dict, Any] | int:
     """Runs the checked specs with SIGINT and SIGTERM caught: (summary, the RunFailed or None),
     or the exit status of a run that stopped or could not start (its message printed)."""
-    from tatl_mj.experiments import executors, lock, records, runner
+    from tatl_mj.experiments.results import records
+    from tatl_mj.experiments.run import executors, lock, runner
 
     failed: runner.RunFailed | None = None
     try:
@@ -183,7 +184,8 @@ def _execute(args: argparse.Namespace, specs: list, seeds: range, methods: dict 
 
 def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
     """Prints a finished run's timings, physics and notes; 1 when some unit failed, else 0."""
-    from tatl_mj.experiments import costs, records
+    from tatl_mj.experiments.results import records
+    from tatl_mj.experiments.run import costs
 
     print("time per experiment and phase (all seeds, phases under 5% not shown):")
     print(costs.format_timings(costs.timings(args.out)))
@@ -197,7 +199,7 @@ def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
         records.write_json(path, physics)
     print(costs.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
-    from tatl_mj.experiments import summary as summary_mod
+    from tatl_mj.experiments.results import summary as summary_mod
 
     for line in summary_mod.notes(summary):
         print(line)
@@ -249,7 +251,7 @@ def _methods(text: str | None) -> dict | None:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from tatl_mj.experiments import plot
+    from tatl_mj.experiments.report import plot
 
     try:
         paths = plot.plot(args.dir)
@@ -274,8 +276,10 @@ def _plot(args: argparse.Namespace) -> int:
 def _compare(args: argparse.Namespace) -> int:
     """``tatl compare``: checks everything first (one line and exit 2 if it cannot run), then runs
     the user's units and writes the tables, or with ``--check`` reruns one reference unit."""
-    from tatl_mj.experiments import compare, records, reference, runner
+    from tatl_mj.experiments import compare
     from tatl_mj.experiments import spec as spec_mod
+    from tatl_mj.experiments.results import records, reference
+    from tatl_mj.experiments.run import runner
 
     try:
         ref = reference.load(args.reference)
@@ -323,7 +327,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _pin(ref: Any) -> Any:
     """The reference's kernels for the user's units, where it names one set and this machine can."""
-    from tatl_mj.experiments import kernels
+    from tatl_mj.experiments.run import kernels
 
     labels = sorted(ref.manifest.kernels)
     if len(labels) != 1:
@@ -362,7 +366,7 @@ def _unit(text: str) -> tuple[str, int, str]:
 
 
 def _reference(args: argparse.Namespace) -> int:
-    from tatl_mj.experiments import records, reference
+    from tatl_mj.experiments.results import records, reference
 
     root = Path(args.root) if args.root else reference.REFERENCE_ROOT
     try:
@@ -384,7 +388,7 @@ def _reference(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from tatl_mj.experiments import export, records
+    from tatl_mj.experiments.results import export, records
 
     try:
         path = export.export(args.dir, args.out, args.format)
@@ -396,7 +400,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from tatl_mj.experiments import clips
+    from tatl_mj.experiments.report import clips
 
     try:
         path = clips.render_from_spec(

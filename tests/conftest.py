@@ -150,8 +150,9 @@ reference_return = -200
 @pytest.fixture(scope="session")
 def tiny_reference(tmp_path_factory):
     """(spec path, run folder, reference set): a finished tiny run and the set packed from it."""
-    from tatl_mj.experiments import reference, runner
     from tatl_mj.experiments import spec as spec_mod
+    from tatl_mj.experiments.results import reference
+    from tatl_mj.experiments.run import runner
 
     folder = tmp_path_factory.mktemp("tiny-reference")
     path = folder / "tiny_flip.toml"

@@ -8,8 +8,10 @@ import shutil
 import pytest
 from conftest import ROOT, tatl
 
-from tatl_mj.experiments import compare, records, reference, runner
+from tatl_mj.experiments import compare
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import records, reference
+from tatl_mj.experiments.run import runner
 
 EXPERIMENT = "tiny_flip"
 PLUGINS = {"PYTHONPATH": str(ROOT / "tests")}

@@ -6,7 +6,7 @@ import math
 import pytest
 from conftest import tatl
 
-from tatl_mj.experiments import export, records
+from tatl_mj.experiments.results import export, records
 
 EXPERIMENT = "tiny_flip"
 

@@ -12,8 +12,9 @@ from test_transfer_method import SourceQ  # Q_S(x, a) = a x_0 over actions -1, 0
 
 from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
-from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.run import pipeline
 from tatl_mj.transfer import registry, roles
 from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures

@@ -206,8 +206,8 @@ def test_algorithm_2_runs_on_the_grid():
 
     from conftest import ROOT
 
-    from tatl_mj.experiments import pipeline
     from tatl_mj.experiments import spec as spec_mod
+    from tatl_mj.experiments.run import pipeline
 
     table = tomllib.loads((ROOT / "tasks" / "grid_to_windy.toml").read_text())
     experiment = spec_mod.parse_spec(table, "grid_to_windy.toml")

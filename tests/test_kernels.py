@@ -6,7 +6,8 @@ import platform
 import pytest
 from conftest import tiny_spec
 
-from tatl_mj.experiments import kernels, records, runner
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import kernels, runner
 
 XEON = "openblas 0.3.30 SkylakeX; openblas 0.3.31 SkylakeX; numpy X86_V3+X86_V4+AVX512_ICL"
 EPYC = "openblas 0.3.30 Haswell; openblas 0.3.31 Haswell; numpy X86_V3"

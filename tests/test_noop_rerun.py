@@ -5,7 +5,8 @@ import json
 import pytest
 from conftest import tatl, write_tiny
 
-from tatl_mj.experiments import costs, records
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import costs
 
 
 def _record(run: records.RunDirectory, seed: int, substeps: int) -> None:
@@ -63,7 +64,8 @@ def test_a_rerun_that_runs_no_unit_keeps_physics_json(tmp_path):
 def test_a_rerun_that_runs_no_unit_reuses_the_summary_unless_its_inputs_changed(tmp_path, monkeypatch):
     from conftest import tiny_spec
 
-    from tatl_mj.experiments import runner, summary
+    from tatl_mj.experiments.results import summary
+    from tatl_mj.experiments.run import runner
 
     spec = tiny_spec()
     only = dict(workers=1, methods=["rl", "rl-reset"], progress=False)

@@ -5,7 +5,8 @@ import pytest
 from conftest import tiny_spec
 
 from tatl_mj import sampling, suite
-from tatl_mj.experiments import costs, records, runner
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import costs, runner
 
 
 def _substeps(key: str) -> int:

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, TINY
 
-from tatl_mj.experiments import pipeline, verdicts
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.run import pipeline
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import make_features
 from tatl_mj.transfer.fqi import LinearQ, TreeQ

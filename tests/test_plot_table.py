@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tatl_mj.experiments import figures, style, tables
+from tatl_mj.experiments.report import figures, style, tables
 
 BUDGETS = [100, 1000, 10000]
 

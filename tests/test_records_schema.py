@@ -5,11 +5,12 @@ code before records were versioned (the flipped pendulum, seed 0).
 """
 
 import json
+import pickle
 from pathlib import Path
 
 import pytest
 
-from tatl_mj.experiments import records
+from tatl_mj.experiments.results import records
 
 SCHEMA1 = Path(__file__).parent / "data" / "schema1"
 
@@ -118,3 +119,24 @@ def test_every_record_written_names_the_current_schema(tmp_path):
     folder = records.RunDirectory(tmp_path)
     folder.write_unit("e", 0, "rl", {"curve": [], "final_return": 0.0})
     assert records.read_json(folder.record_path("e", 0, "rl"))["schema_version"] == records.SCHEMA_VERSION
+
+
+def test_a_source_cache_pickled_before_a_module_moved_is_read_at_its_new_home():
+    # A run folder started before experiments/ was split names its classes by their old
+    # modules; resuming it must read them (protocol 0 writes module paths as plain lines).
+    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.transfer import mappings
+
+    mapping = mappings.MAPPINGS[sorted(mappings.MAPPINGS)[0]]
+    artifacts = pipeline.SourceArtifacts(
+        source_q=None, mapping=mapping, target_stream=None, random_return=-1.0, mapping_target_samples=0,
+        mapping_source_samples=0, source_samples=3, timings={},
+    )  # fmt: skip
+    blob = pickle.dumps(artifacts, protocol=0)
+    for old, new in records.MOVED_MODULES.items():
+        blob = blob.replace(f"c{new}\n".encode(), f"c{old}\n".encode())
+    assert b"ctatl_mj.experiments.pipeline\n" in blob
+    with pytest.raises(ModuleNotFoundError):
+        pickle.loads(blob)
+    read = records.load_blob(blob)
+    assert type(read) is pipeline.SourceArtifacts and read.source_samples == 3 and read.mapping is mapping

@@ -7,8 +7,8 @@ import shutil
 import pytest
 from conftest import tatl
 
-from tatl_mj.experiments import records, reference
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import records, reference
 
 EXPERIMENT = "tiny_flip"
 

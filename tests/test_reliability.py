@@ -16,8 +16,9 @@ from conftest import ROOT, tiny_spec, write_tiny
 from conftest import tatl as _tatl
 
 from tatl_mj import suite
-from tatl_mj.experiments import lock, records
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import lock
 from tatl_mj.suite import bicycle, cartpole, mountain_car, pendulum
 
 ENV = {**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl", "PYTHONPATH": str(ROOT)}
@@ -184,7 +185,7 @@ def test_second_run_into_the_same_folder_refuses_naming_the_first(tmp_path):
         [
             sys.executable,
             "-c",
-            f"import sys, time\nfrom tatl_mj.experiments import lock\n"
+            f"import sys, time\nfrom tatl_mj.experiments.run import lock\n"
             f"with lock.hold({str(out)!r}):\n print('held', flush=True)\n time.sleep(60)",
         ],
         env=ENV,
@@ -263,7 +264,7 @@ def test_read_json_names_the_file_it_cannot_parse(tmp_path):
 
 
 def test_run_recomputes_corrupt_records_and_caches(tmp_path):
-    from tatl_mj.experiments import runner
+    from tatl_mj.experiments.run import runner
 
     spec = tiny_spec()
     runner.run([spec], "tiny", [0], tmp_path, workers=1, methods=["rl"], progress=False)
@@ -282,7 +283,7 @@ def test_run_recomputes_corrupt_records_and_caches(tmp_path):
 
 
 def test_a_run_stopped_inside_a_write_leaves_no_temporary_file(tmp_path, monkeypatch):
-    from tatl_mj.experiments import runner
+    from tatl_mj.experiments.run import runner
 
     def stopped_mid_write(specs, preset, seeds, run_dir, *rest, **settings):
         tmp = run_dir.record_path(specs[0].name, 0, "rl").with_name(".rl.json.0123abcd.tmp")
@@ -380,7 +381,7 @@ def test_spec_names_that_are_not_safe_folder_names_are_refused(name):
 
 
 def test_runner_refuses_a_run_with_nothing_to_do(tmp_path):
-    from tatl_mj.experiments import runner
+    from tatl_mj.experiments.run import runner
 
     with pytest.raises(ValueError, match="nothing to run"):
         runner.run([tiny_spec()], "tiny", [], tmp_path / "out")

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 from conftest import ROOT, TINY, tiny_spec, write_tiny
 
-from tatl_mj.experiments import costs, records, runner, tables
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.report import tables
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import costs, runner
 
 
 def test_local_run_writes_records_and_summary(tmp_path):
@@ -162,7 +164,7 @@ def test_ray_executor_matches_local(tmp_path):
 
 
 def test_affine_mapping_equal_to_identity_gives_identical_results():
-    from tatl_mj.experiments import pipeline
+    from tatl_mj.experiments.run import pipeline
 
     identity = tiny_spec()
     table = tomllib.loads((ROOT / "tasks" / "ip_to_flipped_ip.toml").read_text())
@@ -189,7 +191,8 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
 
     import numpy as np
 
-    from tatl_mj.experiments import clips, pipeline
+    from tatl_mj.experiments.report import clips
+    from tatl_mj.experiments.run import pipeline
 
     spec = tiny_spec()
     runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
@@ -228,7 +231,7 @@ def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
 
 @pytest.mark.parametrize("variant", ["mc_to_ip_triplets", "mc_to_ip_energy"])
 def test_learned_and_given_maps_are_recorded_with_their_coefficients(variant):
-    from tatl_mj.experiments import pipeline
+    from tatl_mj.experiments.run import pipeline
 
     experiment = spec_mod.load_spec(ROOT / "tasks" / "variants" / f"{variant}.toml")  # resolves its extends
     tiny = spec_mod.Preset(**{**TINY, "target_budgets": tuple(TINY["target_budgets"]), "alignment_samples": 200})
@@ -262,7 +265,7 @@ def test_a_variant_runs_under_its_own_name_and_equals_its_built_in(tmp_path):
 
 def test_paper_protocol_data_are_collected_once_and_nest_across_budgets():
     # Each budget's head of one largest collection is exactly a fresh collection of that size.
-    from tatl_mj.experiments import pipeline
+    from tatl_mj.experiments.run import pipeline
 
     spec = spec_mod.load_spec(ROOT / "tasks" / "grid_to_windy.toml")
 

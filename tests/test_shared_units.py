@@ -6,8 +6,9 @@ import tomllib
 import pytest
 from conftest import tiny_spec
 
-from tatl_mj.experiments import pipeline, records, runner
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.run import pipeline, runner
 from tatl_mj.experiments.spec import MappingSpec
 from tatl_mj.transfer import method, registry
 
@@ -160,7 +161,7 @@ def test_a_lost_source_unit_takes_the_first_experiments_artefacts_again(tmp_path
 
 
 def test_copied_rows_count_once_across_experiments():
-    from tatl_mj.experiments import summary
+    from tatl_mj.experiments.results import summary
 
     scores = [[0.0, 0.5], [0.0, 0.9], [0.0, 1.0], [0.0, 0.2]]
     own = {"seeds": [0, 1, 2, 3], "normalised": scores}

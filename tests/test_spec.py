@@ -284,7 +284,7 @@ def test_a_bad_import_path_is_one_line_naming_the_key(edit, message):
 
 
 def test_the_spec_loader_takes_its_mapping_kinds_from_the_mappings_table():
-    from tatl_mj.experiments.mappings import MAPPINGS
+    from tatl_mj.transfer.mappings import MAPPINGS
 
     assert tuple(MAPPINGS) == ("identity", "manifold_alignment", "transition_alignment", "affine")
 

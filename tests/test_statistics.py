@@ -1,9 +1,9 @@
-"""Interval estimates (tatl_mj.experiments.statistics) against independent computations."""
+"""Interval estimates (tatl_mj.experiments.results.statistics) against independent computations."""
 
 import numpy as np
 import pytest
 
-from tatl_mj.experiments import statistics as st
+from tatl_mj.experiments.results import statistics as st
 
 
 def test_iqm_is_the_mean_of_the_middle_half():
@@ -98,7 +98,7 @@ def test_kaplan_meier_equals_the_textbook_product():
 def test_the_across_experiments_interval_does_not_depend_on_the_specs_order():
     # The bootstrap resamples each experiment's seeds in stratum order; the same records given
     # in another order (another command line, or summary.json's sorted keys) give the same interval.
-    from tatl_mj.experiments import summary
+    from tatl_mj.experiments.results import summary
 
     rng = np.random.default_rng(3)
     experiments = {

@@ -7,8 +7,9 @@ import pytest
 from conftest import ROOT, TINY
 
 from tatl_mj import suite
-from tatl_mj.experiments import pipeline, summary
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import summary
+from tatl_mj.experiments.run import pipeline
 from tatl_mj.suite import bicycle
 
 

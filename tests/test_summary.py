@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from tatl_mj.experiments import summary, verdicts
+from tatl_mj.experiments.results import summary, verdicts
 
 
 def test_samples_to_threshold_is_where_the_return_stays_above():

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 from conftest import ROOT, TINY
 
-from tatl_mj.experiments import credit_maps, runner, tables, verdicts
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.experiments import statistics as stats
+from tatl_mj.experiments.report import credit_maps, tables
+from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.run import runner
 
 COSTS = ("physics_substeps", "blob_sha256")
 

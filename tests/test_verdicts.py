@@ -1,4 +1,4 @@
-"""The verdict rule (tatl_mj.experiments.verdicts, statistics): known answers, declared before any rerun.
+"""The verdict rule (tatl_mj.experiments.results.verdicts, statistics): known answers, declared before any rerun.
 
 The five cases the rule must get right (docs/protocol.md, "Verdicts"), each through the
 whole path a run takes (summary._statistics on a summary experiment), then the pieces
@@ -13,8 +13,8 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
-from tatl_mj.experiments import statistics as st
-from tatl_mj.experiments import summary, verdicts
+from tatl_mj.experiments.results import statistics as st
+from tatl_mj.experiments.results import summary, verdicts
 
 BUDGETS = [100, 1000, 10000]
 REFERENCE = 10.0

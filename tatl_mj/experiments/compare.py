@@ -1,6 +1,6 @@
 """``tatl compare``: a user's methods against a reference set, on its protocol, without rerunning it.
 
-The reference set (:mod:`tatl_mj.experiments.reference`) holds every built-in
+The reference set (:mod:`tatl_mj.experiments.results.reference`) holds every built-in
 method's records for its specs, preset and seeds. A comparison runs only the
 user's method units and the per-seed source units they need, with the
 reference's preset and seeds, into its own run folder; it then writes the
@@ -32,16 +32,25 @@ verdicts the reference's manifest marks as moving with kernels.
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from tatl_mj.experiments import kernels as kernels_mod
-from tatl_mj.experiments import plot, runner
-from tatl_mj.experiments import summary as summary_mod
-from tatl_mj.experiments.records import SCHEMA_VERSION, SOURCE_UNIT, RunDirectory, read_json, read_record, write_json
-from tatl_mj.experiments.reference import ReferenceSet
+from tatl_mj.experiments.report import plot
+from tatl_mj.experiments.results import summary as summary_mod
+from tatl_mj.experiments.results.records import (
+    SCHEMA_VERSION,
+    SOURCE_UNIT,
+    RunDirectory,
+    read_json,
+    read_record,
+    write_json,
+)
+from tatl_mj.experiments.results.reference import ReferenceSet
+from tatl_mj.experiments.run import kernels as kernels_mod
+from tatl_mj.experiments.run import runner
 from tatl_mj.experiments.spec import ExperimentSpec, conditions, content_hash, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import roles
 
@@ -278,6 +287,12 @@ def kernels_note(planned: Plan, computed: dict[str, int], pin: kernels_mod.Pin |
     )
 
 
+def _workers(pin: kernels_mod.Pin | None) -> contextlib.AbstractContextManager:
+    # No pin: the workers inherit this process's environment as `tatl run`'s do (an empty
+    # Pin would clear OPENBLAS_CORETYPE where the machine sets it, and change the kernels).
+    return kernels_mod.workers_under(pin) if pin is not None else contextlib.nullcontext()
+
+
 def run(
     planned: Plan, out: str | Path, *, workers: int = 2, progress: bool = True, pin: kernels_mod.Pin | None = None
 ) -> Outcome:
@@ -296,7 +311,7 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     _claim(out, planned)
     failed: runner.RunFailed | None = None
-    with kernels_mod.workers_under(pin or kernels_mod.Pin(env={}, kernels="")):
+    with _workers(pin):
         try:
             own = runner.run(
                 list(planned.specs), planned.preset, planned.seeds, out, workers=workers, methods=planned.methods,
@@ -436,7 +451,7 @@ def check(planned: Plan, unit: tuple[str, int, str] | None = None, pin: kernels_
         if (e, s) == (experiment, seed) and u in (SOURCE_UNIT, method)
     }
     with tempfile.TemporaryDirectory(prefix="tatl-check-") as folder:
-        with kernels_mod.workers_under(pin or kernels_mod.Pin(env={}, kernels="")):
+        with _workers(pin):
             # Two workers: each unit in a spawned process, which the pinned kernels reach.
             runner.run([spec], planned.preset, [seed], folder, workers=2, methods=[method], progress=False)
         run_dir = RunDirectory(folder)

@@ -158,7 +158,7 @@ class ExperimentSpec:
     # take the sweep's, so each draws what the spec run alone with those task_kwargs
     # draws; a variant that changes only the mapping names its parent, so both draw the
     # same source data, target samples and evaluation starts (a paired comparison), and
-    # their methods without a source are computed once (``tatl_mj.experiments.runner``).
+    # their methods without a source are computed once (``tatl_mj.experiments.run.runner``).
     streams: str = ""
     # The strongest baseline per verdict question ({"final": NAME, "efficiency": NAME}),
     # chosen on the tuning seeds and frozen here (``verdicts.choose_best_baseline``): every
@@ -334,7 +334,7 @@ def _check_source_learning(spec: ExperimentSpec, description: Any) -> None:
 
 
 def _check_mapping(spec: ExperimentSpec, source: Any, target: Any) -> None:
-    from tatl_mj.experiments.mappings import MAPPINGS, transition_settings
+    from tatl_mj.transfer.mappings import MAPPINGS, transition_settings
 
     p, mapping = spec.path, spec.mapping
     _choice(p, "mapping.kind", mapping.kind, tuple(MAPPINGS))

@@ -41,7 +41,7 @@ such as ``ta-tl-h-no-cart``). Without it, NAME is the built-in itself. A value
 
 PAIR_KEYS = ("ablation", "placebo")
 """Keys of a spec's ``[methods.NAME]`` table that declare which method NAME is judged against
-(its source-free ablation, its placebo; ``tatl_mj.experiments.verdicts``): not settings."""
+(its source-free ablation, its placebo; ``tatl_mj.experiments.results.verdicts``): not settings."""
 
 
 def base_of(name: str, settings: dict[str, Any] | None = None) -> str:

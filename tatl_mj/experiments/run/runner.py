@@ -33,19 +33,21 @@ from typing import Any, Callable, Iterable
 from tqdm import tqdm
 
 from tatl_mj import sampling
-from tatl_mj.experiments import executors, lock, pipeline, verdicts
-from tatl_mj.experiments import summary as summary_mod
-from tatl_mj.experiments.kernels import kernels
-from tatl_mj.experiments.records import (
+from tatl_mj.experiments.results import summary as summary_mod
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.records import (
     SCHEMA_VERSION,
     SOURCE_UNIT,
     RecordError,
     RunDirectory,
+    load_blob,
     read_json,
     read_record,
     write_atomic,
     write_json,
 )
+from tatl_mj.experiments.run import executors, lock, pipeline
+from tatl_mj.experiments.run.kernels import kernels
 from tatl_mj.experiments.spec import NOT_CONTENT, ExperimentSpec, conditions, dynamics_versions, spec_to_dict
 from tatl_mj.transfer import fit_time, registry
 from tatl_mj.transfer.method import contract
@@ -118,7 +120,7 @@ def _work(
     substeps, fits = sampling.physics_substeps(), fit_time.fqi_seconds()
     if unit.name == SOURCE_UNIT:
         # source_blob here: the artefacts of an experiment that differs only in its mapping.
-        shared = pickle.loads(source_blob) if source_blob is not None else None
+        shared = load_blob(source_blob) if source_blob is not None else None
         artifacts = pipeline.learn_source(spec, preset, unit.seed, shared)
         blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
         record = {
@@ -132,7 +134,7 @@ def _work(
             "timings": artifacts.timings,
         }
     else:
-        artifacts = pickle.loads(source_blob)
+        artifacts = load_blob(source_blob)
         blob = None
         record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
     record["kernels"] = kernels()  # what it depends on besides its settings and seed

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments import verdicts
-from tatl_mj.experiments.figures import LINE_STYLES, axis_limits, mark_clipped
-from tatl_mj.experiments.style import method_colors, order
-from tatl_mj.experiments.summary import REFERENCE_THRESHOLD
+from tatl_mj.experiments.report.figures import LINE_STYLES, axis_limits, mark_clipped
+from tatl_mj.experiments.report.style import method_colors, order
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.summary import REFERENCE_THRESHOLD
 
 
 def sweeps(summary: dict) -> dict[str, list[tuple[dict, dict]]]:

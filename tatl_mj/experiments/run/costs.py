@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from tatl_mj import sampling
-from tatl_mj.experiments.records import SOURCE_UNIT, RunDirectory, read_json
+from tatl_mj.experiments.results.records import SOURCE_UNIT, RunDirectory, read_json
 
 
 def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:

@@ -12,12 +12,12 @@ Definitions (one place; the table, the figures and summary.json all use them):
   spec that declares no reference falls back to ``R_random + 0.95 (R_best -
   R_random)``, ``R_best`` the best method's mean final return (relative to the
   methods listed, so the table says so).
-- Interval estimates (``tatl_mj.experiments.statistics``), with a reference:
+- Interval estimates (``tatl_mj.experiments.results.statistics``), with a reference:
   per method and budget the IQM of the normalised score with its 95%
   stratified-bootstrap interval; the efficiency area under the normalised
   learning curve over log counted target transitions (``efficiency``), and on
   the paper's accounting (``efficiency_paper``); and the verdicts of the pairs
-  the spec declares, two questions each (``tatl_mj.experiments.verdicts``).
+  the spec declares, two questions each (``tatl_mj.experiments.results.verdicts``).
 - No meaningful threshold: a threshold at or below ``R_random`` (no method beat
   the random policy on average) says nothing about learning speed; samples to
   threshold are then not reported and the experiment is judged on final returns.
@@ -42,9 +42,9 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments import statistics as stats
-from tatl_mj.experiments import verdicts
-from tatl_mj.experiments.records import SCHEMA_VERSION, UNKNOWN_KERNELS, RunDirectory, read_record
+from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.records import SCHEMA_VERSION, UNKNOWN_KERNELS, RunDirectory, read_record
 
 THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
 REFERENCE_THRESHOLD = 0.9  # normalised score: the threshold with a declared reference return

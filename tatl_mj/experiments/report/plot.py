@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tatl_mj.experiments import credit_maps, figures, tables
-from tatl_mj.experiments.records import read_record
-from tatl_mj.experiments.summary import compare
+from tatl_mj.experiments.report import credit_maps, figures, tables
+from tatl_mj.experiments.results.records import read_record
+from tatl_mj.experiments.results.summary import compare
 
 
 def plot(run_dir: str | Path) -> list[Path]:

@@ -26,8 +26,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from tatl_mj.experiments import summary as summary_mod
-from tatl_mj.experiments.records import (
+from tatl_mj.experiments.results import summary as summary_mod
+from tatl_mj.experiments.results.records import (
     SCHEMA_VERSION,
     SOURCE_UNIT,
     RecordError,
@@ -39,7 +39,7 @@ from tatl_mj.experiments.records import (
 )
 from tatl_mj.experiments.spec import content_hash
 
-REFERENCE_ROOT = Path(__file__).resolve().parents[1] / "reference"
+REFERENCE_ROOT = Path(__file__).resolve().parents[2] / "reference"
 """Where the shipped sets live (``tatl_mj/reference``, a link to the repository's ``reference/``)."""
 MANIFEST = "manifest.json"
 SPECS = "specs.json.xz"

@@ -2,7 +2,7 @@
 
 A dispatcher takes the first jobs and a callback (``Then``) that records each finished
 unit's result and returns the jobs it unlocked (a source's methods), and runs until none
-is left. Both run :func:`tatl_mj.experiments.runner.work` in their workers, one thread a
+is left. Both run :func:`tatl_mj.experiments.run.runner.work` in their workers, one thread a
 unit, so a record does not depend on the executor.
 """
 
@@ -14,8 +14,8 @@ import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable
 
-from tatl_mj.experiments import reaper
-from tatl_mj.experiments import workers as workers_mod
+from tatl_mj.experiments.run import reaper
+from tatl_mj.experiments.run import workers as workers_mod
 
 EXECUTORS = ("local", "ray")
 CONNECT_TIMEOUT_S = 10.0

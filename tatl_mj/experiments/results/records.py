@@ -20,6 +20,7 @@ field. A record from a newer schema is refused (:class:`SchemaError`).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import logging
 import os
@@ -47,6 +48,24 @@ STREAM_DATA = ("shared", "stream")
 """``data`` settings under which a method learns from the shared stream (counted by ``samples_used``)."""
 UNKNOWN_KERNELS = "unknown"
 """The ``kernels`` of a schema-1 record older than that field."""
+
+
+MOVED_MODULES = {
+    "tatl_mj.experiments.pipeline": "tatl_mj.experiments.run.pipeline",
+    "tatl_mj.experiments.mappings": "tatl_mj.transfer.mappings",
+}
+"""Modules whose classes a source cache (``source.pkl``) written before a move names: old path -> new."""
+
+
+class _MovedUnpickler(pickle.Unpickler):
+    def find_class(self, module: str, name: str) -> Any:
+        return super().find_class(MOVED_MODULES.get(module, module), name)
+
+
+def load_blob(blob: bytes) -> Any:
+    """A source cache's artefacts, read from a run folder written before or after a module moved
+    (a resumed run must not lose its finished sources to a rename)."""
+    return _MovedUnpickler(io.BytesIO(blob)).load()
 
 
 class RecordError(ValueError):

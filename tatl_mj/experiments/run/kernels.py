@@ -94,7 +94,7 @@ def probe(env: dict[str, str] | None = None) -> str:
     process's environment, :data:`PIN_VARIABLES` cleared first); RuntimeError with the
     child's last line if it fails (numpy refuses to disable a baseline target)."""
     child = {k: v for k, v in os.environ.items() if k not in PIN_VARIABLES}
-    code = "from tatl_mj.experiments.kernels import kernels; print(kernels())"
+    code = "from tatl_mj.experiments.run.kernels import kernels; print(kernels())"
     done = subprocess.run(
         [sys.executable, "-c", code],
         env={**child, **(env or {})},

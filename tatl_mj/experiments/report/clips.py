@@ -9,7 +9,6 @@ largest target-sample budget, built by the same call as in evaluation
 
 from __future__ import annotations
 
-import pickle
 import warnings
 from pathlib import Path
 from typing import Any
@@ -17,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from tatl_mj import render, suite
-from tatl_mj.experiments import pipeline
-from tatl_mj.experiments.records import RunDirectory
+from tatl_mj.experiments.results.records import RunDirectory, load_blob
+from tatl_mj.experiments.run import pipeline
 from tatl_mj.experiments.spec import ExperimentSpec, load_spec, methods_from_spec
 
 RANDOM = "random"  # the uniformly random reference policy
@@ -30,7 +29,7 @@ def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceA
         blob = folder.blob_path(spec.name, seed)
         # is_done validates the cache against its record (and moves a corrupt one aside).
         if folder.is_done(spec.name, seed, "source"):
-            return pickle.loads(folder.read_blob(spec.name, seed))
+            return load_blob(folder.read_blob(spec.name, seed))
         print(f"note: no valid {blob}; training seed {seed} at preset {preset} instead")
     return pipeline.learn_source(spec, spec.preset(preset), seed)
 

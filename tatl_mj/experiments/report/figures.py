@@ -1,7 +1,7 @@
 """`tatl plot`'s figures: per experiment its learning curves on both accountings and its paired
 verdicts, and the performance profiles across experiments.
 
-Everything is drawn from the run's summary (:mod:`tatl_mj.experiments.summary`), so a figure
+Everything is drawn from the run's summary (:mod:`tatl_mj.experiments.results.summary`), so a figure
 and the tables show the same seeds and numbers. Where the experiment declares a reference
 return (every shipped preset does):
 
@@ -29,10 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments import verdicts
-from tatl_mj.experiments.style import compact, method_colors, method_label, order, spaced_ticks
-from tatl_mj.experiments.summary import REFERENCE_THRESHOLD, THRESHOLD_FRACTION, Comparison, MethodResult, compare
-from tatl_mj.experiments.tables import seed_note
+from tatl_mj.experiments.report.style import compact, method_colors, method_label, order, spaced_ticks
+from tatl_mj.experiments.report.tables import seed_note
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.summary import (
+    REFERENCE_THRESHOLD,
+    THRESHOLD_FRACTION,
+    Comparison,
+    MethodResult,
+    compare,
+)
 
 LINE_STYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))  # cycled, so overlapping curves both show
 MARKERS = ("o", "s", "D", "^", "v", "P", "X", "h", "<", ">")  # cycled, so coinciding points both show
@@ -525,7 +531,7 @@ def profile(summary: dict, path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from tatl_mj.experiments.statistics import performance_profile
+    from tatl_mj.experiments.results.statistics import performance_profile
 
     rows = summary["aggregate"]
     taus = np.linspace(-0.5, 1.5, 201)

@@ -81,7 +81,7 @@ def start() -> subprocess.Popen | None:
     if stat is None:
         return None
     return subprocess.Popen(
-        [sys.executable, "-m", "tatl_mj.experiments.reaper", str(me), str(stat[1])],
+        [sys.executable, "-m", "tatl_mj.experiments.run.reaper", str(me), str(stat[1])],
         stdin=subprocess.DEVNULL,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments import statistics as stats
+from tatl_mj.experiments.results import statistics as stats
 from tatl_mj.transfer import roles
 
 VERDICT_RULE_VERSION = 2

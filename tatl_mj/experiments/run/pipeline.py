@@ -34,10 +34,9 @@ import threadpoolctl
 
 from tatl_mj import sampling, suite
 from tatl_mj.description import TaskDescription
-from tatl_mj.experiments import mappings
-from tatl_mj.experiments.records import STREAM_DATA
+from tatl_mj.experiments.results.records import STREAM_DATA
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, Side, methods_from_spec
-from tatl_mj.transfer import apprentice, fqi, method, tabular_q
+from tatl_mj.transfer import apprentice, fqi, mappings, method, tabular_q
 from tatl_mj.transfer.methods import horizon
 from tatl_mj.transfer.placebo import placebo_q
 from tatl_mj.transitions import Transitions

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments import statistics as stats
-from tatl_mj.experiments.records import RunDirectory, read_record, write_atomic
+from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results.records import RunDirectory, read_record, write_atomic
 
 FORMATS = ("csv",)
 COLUMNS = (

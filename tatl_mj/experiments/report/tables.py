@@ -1,7 +1,7 @@
 """The markdown a run's summary reads as: results.md's tables, the sweeps' credit tables, and the
 headline tables the README and docs/results-paper.md print (``paper_table``, ``verdict_table``).
 
-Everything is read from summary.json (:mod:`tatl_mj.experiments.summary`): a table and the
+Everything is read from summary.json (:mod:`tatl_mj.experiments.results.summary`): a table and the
 figures of the same run show the same seeds and numbers. The definitions behind the columns
 live once, in docs/protocol.md; :func:`table` opens with a short key.
 """
@@ -13,10 +13,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tatl_mj.experiments import statistics as stats
-from tatl_mj.experiments import verdicts
-from tatl_mj.experiments.style import interval_text, method_label, order, samples_text, seed_range
-from tatl_mj.experiments.summary import (
+from tatl_mj.experiments.report.style import interval_text, method_label, order, samples_text, seed_range
+from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.summary import (
     REFERENCE_THRESHOLD,
     THRESHOLD_FRACTION,
     Comparison,
