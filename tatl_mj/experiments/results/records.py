@@ -55,11 +55,14 @@ MOVED_MODULES = {
     "tatl_mj.experiments.mappings": "tatl_mj.transfer.mappings",
 }
 """Modules whose classes a source cache (``source.pkl``) written before a move names: old path -> new."""
+MOVED_NAMES: dict[tuple[str, str], str] = {}
+"""Single classes or functions that left a module split in parts: (old module, name) -> new module."""
 
 
 class _MovedUnpickler(pickle.Unpickler):
     def find_class(self, module: str, name: str) -> Any:
-        return super().find_class(MOVED_MODULES.get(module, module), name)
+        module = MOVED_MODULES.get(module, module)
+        return super().find_class(MOVED_NAMES.get((module, name), module), name)
 
 
 def load_blob(blob: bytes) -> Any:
