@@ -6,6 +6,7 @@ import argparse
 import json
 from typing import Any
 
+from tatl_mj.bench.contexts import MODES
 from tatl_mj.bench.machine import machine, physics_tasks, reference
 from tatl_mj.bench.report import print_record
 from tatl_mj.bench.stepping import time_domain
@@ -49,6 +50,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "the domains timed; empty skips them)",
     )
     parser.add_argument("--vector-envs", type=int, default=64, help="envs of each vector env (default 64)")
+    parser.add_argument(
+        "--contexts",
+        choices=MODES,
+        default=None,
+        help="time the vector envs with a context per env: distinct (one each) or resample (a new one at each "
+        "reset), beside raw rollout over the same per-env models (default: no contexts, beside SyncVectorEnv)",
+    )
 
 
 def vector_tasks(args: argparse.Namespace, domains: list[str]) -> list[tuple[str, str]]:

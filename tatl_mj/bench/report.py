@@ -53,10 +53,18 @@ def print_record(record: dict[str, Any]) -> None:
                 f"dm_control loop {figures['dm_control_vs_floor']:.2f}x dm_control's own floor"
             )
         for task, figures in record["vector"].items():
-            print(
-                f"{task}: native vector env ({record['vector_envs']} envs) "
-                f"{figures['vector_vs_rollout']:.2f}x raw rollout (median of each repeat's pair "
-                f"{figures['vector_vs_rollout_paired']:.2f}), {figures['vector_vs_sync_vector']:.1f}x SyncVectorEnv "
-                f"(paired {figures['vector_vs_sync_vector_paired']:.1f}; raw rollout itself "
-                f"{figures['rollout_vs_sync_vector']:.1f}x)"
-            )
+            print(_vector_line(task, figures, record["vector_envs"]))
+
+
+def _vector_line(task: str, figures: dict[str, Any], num_envs: int) -> str:
+    line = (
+        f"{task}: native vector env ({num_envs} envs) {figures['vector_vs_rollout']:.2f}x raw rollout "
+        f"(median of each repeat's pair {figures['vector_vs_rollout_paired']:.2f})"
+    )
+    if "contexts" in figures:
+        return f"{line}, contexts {figures['contexts']} (raw rollout over the same per-env models)"
+    return (
+        f"{line}, {figures['vector_vs_sync_vector']:.1f}x SyncVectorEnv "
+        f"(paired {figures['vector_vs_sync_vector_paired']:.1f}; raw rollout itself "
+        f"{figures['rollout_vs_sync_vector']:.1f}x)"
+    )
