@@ -154,12 +154,20 @@ class TatlEnv(gymnasium.Env):
         camera: str | None = None,
         normalize_actions: bool = True,
         action_dtype: Any = ACTION_DTYPE,
+        context_in_observation: bool = False,
     ) -> None:
         check_physics_task(domain, task)
         check_render_mode(render_mode)
+        if not isinstance(context_in_observation, bool):
+            raise ValueError(f"context_in_observation must be True or False, got {context_in_observation!r}")
+        self._domain, self._task_name, self._task_kwargs = domain, task, dict(task_kwargs or {})
         self._env = suite.load(domain, task, task_kwargs=task_kwargs)
+        # The context of the episodes from the last reset that gave one (None: task_kwargs' own).
+        self._context: dict[str, float] | None = None
+        self._context_in_observation = context_in_observation
+        self._context_size = len(suite.context_spec(domain, task).keys) if context_in_observation else 0
         (size,) = self._env.observation_spec()["state"].shape
-        self.observation_space = observation_space(size)
+        self.observation_space = observation_space(size + self._context_size)
         self._high = actuator_limit(self._env, f"{domain}/{task}")
         self.action_space, self._scale = action_space(self._high, normalize_actions, action_dtype)
         self.render_mode = render_mode
@@ -181,11 +189,19 @@ class TatlEnv(gymnasium.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Starts an episode; ``seed`` reseeds the task's random state. ``options={"context": c}``
+        gives this episode and the next ones the context ``c`` (``suite.check_context``): the task
+        is built again with it, its random state carried over."""
         super().reset(seed=seed)
+        options = dict(options or {})
+        if "context" in options:
+            self._set_context(options.pop("context"))
+        if options:
+            raise ValueError(f"unknown reset options {sorted(options)}; valid: ['context']")
         if seed is not None:
             self._env.task.random.seed(seed)
         timestep = self._env.reset()
-        return self._observation(timestep), {}
+        return self._observation(timestep), self._info({})
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         timestep = self._env.step(actuator_values(action, self.action_space, self._scale))
@@ -195,7 +211,7 @@ class TatlEnv(gymnasium.Env):
             info["diverged"] = diverged
         terminated = bool(timestep.last() and timestep.discount == 0)
         truncated = bool(timestep.last() and not terminated)
-        return self._observation(timestep), float(timestep.reward or 0.0), terminated, truncated, info
+        return self._observation(timestep), float(timestep.reward or 0.0), terminated, truncated, self._info(info)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -206,9 +222,33 @@ class TatlEnv(gymnasium.Env):
     def close(self) -> None:
         self._env.physics.free_canvases()
 
+    @property
+    def context(self) -> dict[str, float]:
+        """The values of every context key in the current episode (``suite.check_context``)."""
+        if self._context is None:
+            self._context = suite.check_context(self._domain, self._task_name, {}, self._task_kwargs)
+        return dict(self._context)
+
+    def _set_context(self, context: Any) -> None:
+        """Builds the task again with ``context`` (checked first), on the same random state."""
+        values = suite.check_context(self._domain, self._task_name, context, self._task_kwargs, "reset context")
+        kwargs = suite.task_kwargs_with_context(self._domain, self._task_name, self._task_kwargs, values)
+        random = self._env.task.random  # the stream goes on, as in an env that was never rebuilt
+        self._env.physics.free_canvases()
+        self._env = suite.load(self._domain, self._task_name, task_kwargs={**kwargs, "random": random})
+        self._context = values
+
+    def _info(self, info: dict[str, Any]) -> dict[str, Any]:
+        if self._context is not None or self._context_in_observation:
+            info["context"] = self.context
+        return info
+
     def _observation(self, timestep: Any) -> np.ndarray:
         # A copy: a diverged step returns the last observation object again.
-        return np.array(timestep.observation["state"], dtype=np.float64)
+        state = np.array(timestep.observation["state"], dtype=np.float64)
+        if not self._context_in_observation:
+            return state
+        return np.concatenate([state, np.fromiter(self.context.values(), np.float64, self._context_size)])
 
 
 def actuator_values(action: Any, space: spaces.Box, scale: np.ndarray) -> np.ndarray:

@@ -14,9 +14,12 @@ episode ends is reset in the same step (``AutoresetMode.SAME_STEP``), its last
 observation in ``info["terminal_observation"]`` and
 ``info["TimeLimit.truncated"]`` true where the time limit, not a terminal state,
 ended it; rewards are float32; ``seed(s)`` seeds env i with ``s + i`` at the
-next ``reset()``. The N envs are one batch, not N objects: ``get_attr``,
-``set_attr`` and ``env_method`` reach the vector env, once for every index
-asked. Wrap it in SB3's ``VecMonitor`` for episode statistics.
+next ``reset()``. Contexts pass through to the vector env
+(``vec_env(id, n, contexts=[...])`` or ``contexts=ContextSampler(...)``,
+``context_in_observation=True``); each env's ``info["context"]`` holds its own
+(that of the observation returned, so a new episode's after an autoreset).
+The N envs are one batch, not N objects: ``get_attr``, ``set_attr`` and
+``env_method`` reach the vector env, once for every index asked. Wrap it in SB3's ``VecMonitor`` for episode statistics.
 
 Stable-Baselines3 and torch are optional (the ``sb3`` extra); nothing else in
 tatl-mj imports this module.
@@ -42,7 +45,8 @@ from tatl_mj import gym as tatl_gym  # noqa: F401  (registers the ids)
 
 def vec_env(env_id: str, num_envs: int, **kwargs: Any) -> Sb3VecEnv:
     """SB3's ``VecEnv`` of ``num_envs`` copies of ``env_id`` (a ``tatl_mj/...-v2`` id) in one batch;
-    ``kwargs`` go to ``gym.make_vec`` (``task_kwargs``, ``render_mode``, ``n_threads``, ...)."""
+    ``kwargs`` go to ``gym.make_vec`` (``task_kwargs``, ``contexts``, ``context_in_observation``,
+    ``render_mode``, ``n_threads``, ...)."""
     if "autoreset_mode" in kwargs:
         raise ValueError("vec_env sets autoreset_mode itself (SB3 resets an ended env in the same step)")
     envs = gymnasium.make_vec(
@@ -84,9 +88,10 @@ class Sb3VecEnv(VecEnv):
         self._next_options = options or None
 
     def reset(self) -> np.ndarray:
-        observations, _ = self.envs.reset(seed=self._next_seeds, options=self._next_options)
+        observations, info = self.envs.reset(seed=self._next_seeds, options=self._next_options)
         self._next_seeds, self._next_options = None, None
         self.reset_infos = [{} for _ in range(self.num_envs)]
+        _add_contexts(self.reset_infos, info)
         return observations
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -102,6 +107,7 @@ class Sb3VecEnv(VecEnv):
         if "diverged" in info:
             for i in np.flatnonzero(info["_diverged"]):
                 infos[i]["diverged"] = info["diverged"][i]
+        _add_contexts(infos, info)
         return observations, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:
@@ -130,3 +136,10 @@ class Sb3VecEnv(VecEnv):
         if indices is None:
             return self.num_envs
         return 1 if isinstance(indices, (int, np.integer)) else len(list(indices))
+
+
+def _add_contexts(infos: list[dict[str, Any]], info: dict[str, Any]) -> None:
+    """Each env's context (key -> value) from the vector env's ``info["context"]`` (key -> values)."""
+    if "context" in info:
+        for i, env_info in enumerate(infos):
+            env_info["context"] = {key: float(values[i]) for key, values in info["context"].items()}

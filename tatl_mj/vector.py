@@ -38,6 +38,7 @@ only the envs in ``mask``.
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium
@@ -50,7 +51,9 @@ from gymnasium.vector.utils import batch_space
 from tatl_mj import gym as tatl_gym
 from tatl_mj import suite
 from tatl_mj.sampling.simulator import controls_each, episode_simulator
+from tatl_mj.suite import ContextSampler
 from tatl_mj.validation import integer
+from tatl_mj.vector_contexts import SimContexts, model_field
 
 AUTORESET_MODES: tuple[AutoresetMode, ...] = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
 
@@ -78,18 +81,18 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         normalize_actions: bool = True,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         n_threads: int | None = None,
+        contexts: Sequence[Mapping[str, Any]] | ContextSampler | None = None,
+        context_in_observation: bool = False,
     ) -> None:
         tatl_gym.check_physics_task(domain, task)
         tatl_gym.check_render_mode(render_mode)
         self.num_envs = integer("", "num_envs", num_envs, 1)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         kwargs = dict(task_kwargs or {})
-        random = kwargs.pop("random", None)
-        if random is not None and (isinstance(random, bool) or not isinstance(random, (int, np.integer))):
-            raise ValueError(
-                f"task_kwargs['random'] must be None or an integer seed (every env starts from it, "
-                f"as make_vec's single envs would; or seed through reset(seed=...)), got {random!r}"
-            )
+        random = _start_seed(kwargs.pop("random", None))
+        # Checked before anything is built; also what the observation carries with context_in_observation.
+        self._contexts = _contexts(domain, task, kwargs, contexts, context_in_observation, self.num_envs)
+        self._context_in_observation = context_in_observation
         self._sim = episode_simulator(domain, task, kwargs, n_threads, max_episode_steps)
         if not self._sim.batched_queries:
             raise ValueError(
@@ -102,10 +105,13 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         self._randoms = [np.random.RandomState(random) for _ in range(self.num_envs)]
         self._task = self._env.task
         self._noisy = bool(self._task.control_noise)
+        # Task keys of the contexts go to the task's controls_each, row by row.
+        self._per_row = self._contexts is not None and bool(self._contexts.task_columns)
 
         limit = tatl_gym.actuator_limit(self._env, f"{domain}/{task}")
         self.single_action_space, self._scale = tatl_gym.action_space(limit, normalize_actions)
-        self.single_observation_space = tatl_gym.observation_space(self._sim.physics.STATE_SIZE)
+        extra = len(self._contexts.names) if context_in_observation and self._contexts is not None else 0
+        self.single_observation_space = tatl_gym.observation_space(self._sim.physics.STATE_SIZE + extra)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         control_timestep = self._env.control_timestep()
@@ -118,16 +124,17 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         self._frame_size = (height, width)
         self._camera = tatl_gym.default_camera(domain, camera)
         self._canvas: Any = None
-        self._camera_id = -1
-        self._render_model: Any = None
+        self._camera_id, self._render_model = -1, None
 
         # Episodes end by time limit after the task's steps or max_episode_steps, the fewer.
         self._task_steps = tatl_gym.episode_steps(self._env, domain, task, kwargs) or np.inf
         self._limit = min(self._task_steps, max_episode_steps or np.inf)
         self._batch = self._sim.new_batch(self.num_envs)
         # A model per step of an episode (model_for_step): per-simulation fields of the batch.
-        if self._sim.fast:
-            self._schedule = None
+        if self._contexts is not None:
+            self._contexts.bind(self._env, self._batch, per_step=not self._sim.fast)
+        if self._sim.fast or self._contexts is not None:
+            self._schedule = None  # contexts write each step's models themselves (write_models)
         else:
             self._schedule = StepModels(self._task, self._env.physics, self._batch, self._limit)
         self._all = np.arange(self.num_envs)
@@ -156,9 +163,11 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         for i in ids:
             if seeds[i] is not None:
                 self._randoms[i].seed(seeds[i])
+        if self._contexts is not None and isinstance(seed, (int, np.integer)):
+            self._contexts.reseed(int(seed))
         self._start(ids)
         self._started = True
-        return self._states.copy(), {}
+        return self._observations(), self._context_info({})
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._started:
@@ -175,10 +184,14 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
             self._start(self._all[resetting])  # NEXT_STEP: these only start their next episode
         if len(ids):
             steps = self._steps[ids]
-            randoms = [self._randoms[i] for i in ids] if self._noisy else None
-            controls = controls_each(self._task, values[ids], randoms)
+            noisy = self._noisy if self._contexts is None else self._contexts.noisy[ids].any()
+            randoms = [self._randoms[i] for i in ids] if noisy else None
+            per_row = self._contexts.task_arrays(ids) if self._per_row else None  # type: ignore[union-attr]
+            controls = controls_each(self._task, values[ids], randoms, per_row)
             if self._schedule is not None:
                 self._schedule.set(self._steps)
+            elif self._contexts is not None and self._contexts.per_step:
+                self._contexts.write_models(ids, steps)
             next_states, diverged = self._sim.advance(self._batch, ids, controls, steps == 0)
             steps += 1
             self._steps[ids] = steps
@@ -195,19 +208,19 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
                 info["diverged"], info["_diverged"] = messages, messages != None  # noqa: E711
             rewards[ids], terminated[ids], truncated[ids] = reward, end, steps >= self._limit
             self._states[ids] = next_states
-        observations = self._states.copy()
+        observations = self._observations()
         done = terminated | truncated
         if self.autoreset_mode is AutoresetMode.SAME_STEP and done.any():
             final = np.full(n, None, dtype=object)
             for i in np.flatnonzero(done):
-                final[i] = observations[i].copy()
+                final[i] = observations[i].copy()  # with the context of the episode that ended
             info["final_obs"], info["_final_obs"] = final, done.copy()
             self._start(self._all[done])
-            observations = self._states.copy()
+            observations = self._observations()
             self._autoreset = np.zeros(n, bool)
         else:
             self._autoreset = done
-        return observations, rewards, terminated, truncated, info
+        return observations, rewards, terminated, truncated, self._context_info(info)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """Each env's frame, from the camera the domain declares (or ``camera``)."""
@@ -219,12 +232,16 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         if self._canvas is None:
             self._canvas = gl.Canvas(self._sim.model, height, width)
             self._camera_id = self._sim.physics.model.name2id(self._camera, "camera")
-            # Scratch for each env's step model; copied once, as a model copy carries its textures.
-            self._render_model = None if self._schedule is None else copy.copy(self._sim.model)
+            # Scratch for each env's own model; copied once, as a model copy carries its textures.
+            per_sim = self._schedule is not None or self._contexts is not None
+            self._render_model = copy.copy(self._sim.model) if per_sim else None
         camera, model = self._camera_id, self._render_model
         data = self._env.physics.data.ptr  # scratch: the env's own physics is never stepped
-        if self._schedule is not None:  # the model of each env's last step, as the single env shows
-            self._schedule.set(np.maximum(self._steps - 1, 0))
+        last = np.maximum(self._steps - 1, 0)  # the model of each env's last step, as the single env shows
+        if self._schedule is not None:
+            self._schedule.set(last)
+        elif self._contexts is not None and self._contexts.per_step:
+            self._contexts.write_models(self._all, last)
         frames = []
         for i in self._all:
             if model is not None:
@@ -243,12 +260,28 @@ class TatlVectorEnv(gymnasium.vector.VectorEnv):
         """Starts the next episode of envs ``ids``, each drawn from its own random stream (lent to
         the task for the draw, then taken back)."""
         shared = self._env.task.random
+        if self._contexts is not None:
+            self._contexts.start(ids)  # a sampler's new contexts, and the models they make
         for i in ids:
+            if self._contexts is not None:
+                self._contexts.lend(int(i))  # the task keys of env i's context, for its draw
             shared.set_state(self._randoms[i].get_state())
             self._states[i] = self._sim.start_episodes(self._batch, np.array([i]), self._env)[0]
             self._randoms[i].set_state(shared.get_state())
         self._steps[ids] = 0
         self._autoreset[ids] = False
+
+    def _observations(self) -> np.ndarray:
+        """The states, each followed by its env's context values with ``context_in_observation``."""
+        if not self._context_in_observation:
+            return self._states.copy()
+        return np.concatenate([self._states, self._contexts.values], axis=1)  # type: ignore[union-attr]
+
+    def _context_info(self, info: dict[str, Any]) -> dict[str, Any]:
+        """``info`` with every env's context (key -> (num_envs,) values), where the env has contexts."""
+        if self._contexts is not None:
+            info["context"], info["_context"] = self._contexts.info(), np.ones(self.num_envs, bool)
+        return info
 
     def _diverged_message(self, i: int) -> str:
         """dm_control's message for simulation ``i``'s warnings (the single env's ``info["diverged"]``)."""
@@ -274,7 +307,7 @@ class StepModels:
     def __init__(self, task: Any, physics: Any, batch: Any, episode_steps: float) -> None:
         self.task, self.physics, self.batch = task, physics, batch
         model = batch.get_model(0)
-        self.base = {name: np.array(_model_field(model, name)) for name in mujoco.batch.MODEL_FIELDS}
+        self.base = {name: np.array(model_field(model, name)) for name in mujoco.batch.MODEL_FIELDS}
         self.tables: dict[str, np.ndarray] = {}  # field -> its value at steps 0, 1, ... (rows known)
         self.live: dict[str, np.ndarray] = {}  # field -> the batch's per-simulation values
         self.known = 0
@@ -302,7 +335,7 @@ class StepModels:
         self.task.model_for_step(self.physics, step)
         model = self.physics.model.ptr
         for name, base in self.base.items():
-            value = np.asarray(_model_field(model, name))
+            value = np.asarray(model_field(model, name))
             if name not in self.tables and value.tobytes() != base.tobytes():
                 # First seen to change at this step: the earlier steps had the batch's value.
                 self.tables[name] = np.empty((capacity, *base.shape), base.dtype)
@@ -313,10 +346,24 @@ class StepModels:
         self.known = step + 1
 
 
-def _model_field(model: Any, name: str) -> Any:
-    """An ``MjModel`` field by its ``mujoco.batch.MODEL_FIELDS`` name (``"opt.timestep"`` included)."""
-    owner, _, attribute = name.rpartition(".")
-    return getattr(getattr(model, owner) if owner else model, attribute)
+def _start_seed(random: Any) -> int | None:
+    if random is not None and (isinstance(random, bool) or not isinstance(random, (int, np.integer))):
+        raise ValueError(
+            f"task_kwargs['random'] must be None or an integer seed (every env starts from it, "
+            f"as make_vec's single envs would; or seed through reset(seed=...)), got {random!r}"
+        )
+    return random
+
+
+def _contexts(
+    domain: str, task: str, kwargs: dict[str, Any], contexts: Any, in_observation: Any, num_envs: int
+) -> SimContexts | None:
+    """The envs' contexts, checked (None: neither contexts nor ``context_in_observation``)."""
+    if not isinstance(in_observation, bool):
+        raise ValueError(f"context_in_observation must be True or False, got {in_observation!r}")
+    if contexts is None and not in_observation:
+        return None
+    return SimContexts(domain, task, kwargs, contexts, num_envs)
 
 
 def _autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:

@@ -199,3 +199,43 @@ def test_passes_stable_baselines3_env_checker_without_a_warning(env_id):
         env = gymnasium.make(env_id)
         sb3_checker.check_env(env)
         sb3_checker.check_env(env.unwrapped)
+
+
+def test_a_reset_context_rebuilds_the_task_for_this_and_later_episodes():
+    env = gymnasium.make("tatl_mj/BicycleBalance-v2", task_kwargs={"time_limit": 0.05})
+    _, info = env.reset(seed=0)
+    assert "context" not in info  # none given
+    _, info = env.reset(seed=0, options={"context": {"speed": 1.5, "rider_mass": 50.0}})
+    assert info["context"]["speed"] == 1.5 and info["context"]["cg_noise"] == 0.02  # the rest: task_kwargs'
+    task, physics = env.unwrapped.dm_environment.task, env.unwrapped.dm_environment.physics
+    assert task.speed == 1.5 and physics.named.model.body_mass["rider"] == 50.0
+    for _ in range(5):  # past the episode's end: the next one keeps the context
+        *_, terminated, truncated, info = env.step(np.zeros(1, np.float32))
+    assert truncated and info["context"]["speed"] == 1.5
+    env.reset()
+    assert env.unwrapped.dm_environment.task.speed == 1.5
+    # The random state goes on across the rebuild: seeded starts equal those of an env built with the context.
+    built = gymnasium.make(
+        "tatl_mj/BicycleBalance-v2", task_kwargs={"speed": 1.5, "params": suite.bicycle.BicycleParams(rider_mass=50.0)}
+    )
+    np.testing.assert_array_equal(env.reset(seed=4)[0], built.reset(seed=4)[0])
+    for _ in range(3):
+        np.testing.assert_array_equal(env.step(np.ones(1, np.float32))[0], built.step(np.ones(1, np.float32))[0])
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"context": {"speeed": 1.0}}, r"reset context: unknown context key\(s\) \['speeed'\]; valid: speed \(m/s"),
+        ({"context": {"cg_noise": 0.5}}, r"context cg_noise must be a number in \[0, 0.25\] m, got 0.5"),
+        ({"contexts": {}}, r"unknown reset options \['contexts'\]; valid: \['context'\]"),
+    ],
+)
+def test_a_bad_reset_context_is_refused_in_one_line_and_the_env_goes_on(options, message):
+    env = gymnasium.make("tatl_mj/BicycleBalance-v2")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message) as error:
+        env.reset(options=options)
+    assert "\n" not in str(error.value)
+    env.step(np.zeros(1, np.float32))  # the env as it was
+    assert env.unwrapped.context["speed"] == suite.bicycle.DEFAULT_SPEED

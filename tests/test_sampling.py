@@ -822,6 +822,32 @@ def test_bench_prints_json_lines_with_the_summary_last(capsys):
     assert "--repeats must be >= 1" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("mode", ["distinct", "resample"])
+def test_bench_times_vector_envs_with_contexts_beside_rollout_over_their_models(capsys, mode):
+    import argparse
+    import json
+
+    pytest.importorskip("gymnasium")
+    from tatl_mj import bench
+
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = ["--json", "--domains", "pendulum", "--vector-tasks", "pendulum/swingup_timevarying", "--seconds", "0.05"]
+    args += ["--repeats", "1", "--memory-transitions", "0", "--fqi-transitions", "0", "--render-frames", "0"]
+    assert bench.run(parser.parse_args(args + ["--vector-envs", "3", "--contexts", mode])) == 0
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    vector = {r["path"]: r for r in records if r["kind"] == "vector"}
+    assert (
+        set(vector) == {"vector", "rollout"} and vector["rollout"]["contexts"] == mode == vector["vector"]["contexts"]
+    )
+    figures = records[-1]["vector"]["pendulum/swingup_timevarying"]
+    assert figures["contexts"] == mode and figures["vector_vs_rollout"] == pytest.approx(
+        vector["vector"]["steps_per_s"] / vector["rollout"]["steps_per_s"]
+    )
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--contexts", "some"])
+
+
 def test_bench_notes_a_missing_gymnasium_and_times_the_rest(capsys, monkeypatch):
     import argparse
 

@@ -81,3 +81,29 @@ def test_the_deep_rl_example_runs_headless(tmp_path):
     assert "Traceback" not in done.stderr and "Warning" not in done.stderr, done.stderr[-3000:]
     assert "trained 200 steps" in done.stdout and "video:" in done.stdout, done.stdout
     assert out.stat().st_size > 1000
+
+
+def test_adapter_passes_contexts_through_to_each_env():
+    # Per-env contexts: the adapter's envs are DummyVecEnv's single envs reset with those contexts,
+    # through SB3's same-step autoresets (each single env keeps its context), bit for bit.
+    env_id, n = "tatl_mj/PendulumSwingupFlipped-v2", 3
+    task_kwargs = {"time_limit": 1.0}  # 20 steps
+    contexts = [{"gain": 0.5}, {"gain": 2.0, "mass": 1.3}, {}]
+    ours = sb3.vec_env(env_id, n, task_kwargs=task_kwargs, contexts=contexts, context_in_observation=True)
+    theirs = DummyVecEnv(
+        [lambda: gymnasium.make(env_id, task_kwargs=task_kwargs, context_in_observation=True) for _ in range(n)]
+    )
+    theirs.set_options([{"context": c} for c in contexts])
+    ours.seed(3), theirs.seed(3)
+    np.testing.assert_array_equal(ours.reset(), theirs.reset())
+    assert ours.observation_space.shape == (6,) and ours.reset_infos[1]["context"]["gain"] == 2.0
+    for row in np.random.default_rng(0).uniform(-1, 1, size=(45, n, 1)).astype(np.float32):
+        got, expected = ours.step(row), theirs.step(row)
+        for k in range(3):
+            np.testing.assert_array_equal(got[k], expected[k])
+        assert [info["context"]["gain"] for info in got[3]] == [0.5, 2.0, 1.0]
+    # A sampler passes through too.
+    sampled = sb3.vec_env(env_id, 2, contexts=tatl_gym.suite.ContextSampler({"gain": (0.5, 2.0)}, seed=1))
+    sampled.reset()
+    gains = [info["context"]["gain"] for info in sampled.reset_infos]
+    assert len(set(gains)) == 2 and all(0.5 <= g <= 2.0 for g in gains)

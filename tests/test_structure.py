@@ -34,7 +34,7 @@ LAYERS = (
     ("tatl_mj.experiments.report",),
     ("tatl_mj.experiments.compare",),
     # Entry points: commands, the Gymnasium registration, its vector env and the SB3 adapter.
-    ("tatl_mj.cli", "tatl_mj.bench", "tatl_mj.gym", "tatl_mj.vector", "tatl_mj.sb3"),
+    ("tatl_mj.cli", "tatl_mj.bench", "tatl_mj.gym", "tatl_mj.vector", "tatl_mj.vector_contexts", "tatl_mj.sb3"),
 )
 """``tatl_mj``'s floors, lowest first: a module may import its own floor and those below."""
 

@@ -316,3 +316,64 @@ def test_skipping_collision_and_constraints_changes_no_number(domain, task):
     computing, _ = mujoco.rollout.rollout(full, mujoco.MjData(full), starts, controls)
     np.testing.assert_array_equal(skipping, computing)
     assert np.abs(skipping[:, -1, 1 : 1 + model.nq]).max() > 10  # it went somewhere
+
+
+# --- Contexts -----------------------------------------------------------------------------
+
+PHYSICS_TASKS = [(d, t) for d, t in suite.ALL_TASKS if not suite.describe(d, t).discrete]
+
+
+def test_docs_list_every_context_key_with_its_unit_and_range():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "suite.md").read_text()
+    rows = set()
+    for line in text.split("## Contexts", 1)[1].splitlines():
+        cells = [c.strip().strip("`") for c in line.strip().strip("|").split("|")]
+        if len(cells) == 6 and cells[1] not in ("key", "---"):
+            task, key, unit, valid, kind = cells[0].split(" ")[0].strip("`"), *cells[1:5]
+            tasks = [f"pendulum/{t}" for t in suite.DOMAINS["pendulum"].TASKS] if task == "pendulum/*" else [task]
+            rows |= {(t, key, unit, valid.split(",")[0], kind) for t in tasks}
+    declared = {
+        (f"{d}/{t}", k.name, k.unit, f"{k.low:g} .. {k.high:g}", k.side)
+        for d, t in PHYSICS_TASKS
+        for k in suite.context_spec(d, t).keys
+    }
+    assert rows == declared
+    # Every condition the sweeps vary is a context key of its target task.
+    sweeps = {("pendulum/swingup_flipped", "gain"), ("pendulum/swingup_timevarying", "amplitude")}
+    sweeps |= {("bicycle/balance", "cg_noise"), ("bicycle/balance", "speed")}
+    assert sweeps <= {(task, key) for task, key, *_ in declared}
+
+
+@pytest.mark.parametrize("domain, task", PHYSICS_TASKS)
+def test_a_context_builds_the_task_a_task_kwargs_would(domain, task):
+    # Each key at the middle of its range: the values check, and the task built with them has them.
+    spec = suite.context_spec(domain, task)
+    context = {k.name: (k.low + k.high) / 2 for k in spec.keys}
+    if task == "swingup_timevarying":
+        context["amplitude"] = 1.0
+    values = suite.check_context(domain, task, context)
+    assert list(values) == list(spec.names) and values == context
+    assert suite.check_context(domain, task, {}) == suite.contexts.defaults(spec, suite.DOMAINS[domain].TASKS[task], {})
+    env = suite.load(domain, task, task_kwargs=suite.task_kwargs_with_context(domain, task, {"random": 0}, values))
+    for key in spec.keys:
+        if key.side == "task":
+            assert getattr(env.task, key.name) == values[key.name]
+        else:
+            owner = env.task.params if domain == "pendulum" else None
+            if owner is not None and key.in_params:
+                assert getattr(owner, key.name) == values[key.name]
+    env.reset()
+    env.step(suite.action_set(domain)[0])
+
+
+def test_a_bad_context_names_the_key_and_the_valid_ones():
+    with pytest.raises(
+        ValueError, match=r"^cartpole/balance context: unknown context key\(s\) \['mass'\]; valid: cart_mass"
+    ):
+        suite.check_context("cartpole", "balance", {"mass": 1.0})
+    with pytest.raises(ValueError, match=r"context speed must be a number in \[0.1, 20\] m/s, got nan"):
+        suite.check_context("bicycle", "balance", {"speed": float("nan")})
+    with pytest.raises(ValueError, match="takes no context"):
+        suite.check_context("gridworld", "plain", {"wind": 1.0})

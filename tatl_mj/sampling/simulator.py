@@ -342,15 +342,19 @@ class Table:
         return int(self.cell_map.index(observed_state(timestep)[None])[0])
 
 
-def controls_each(task: Any, values: np.ndarray, randoms: list | None) -> np.ndarray:
+def controls_each(
+    task: Any, values: np.ndarray, randoms: list | None, context: dict[str, np.ndarray] | None = None
+) -> np.ndarray:
     """The control rows of action values ``values`` (N, m): row i draws the noise its controls
     carry from ``randoms[i]``, the same numbers as ``task.controls(values[i:i + 1], randoms[i])``;
-    ``randoms`` None: noise-free controls, which draw nothing (one call for all rows)."""
+    ``randoms`` None: noise-free controls, which draw nothing (one call for all rows).
+    ``context``: per-row task settings (a vector env's contexts), for a task whose
+    ``controls_each`` takes them."""
     if randoms is None:
         return task.controls(values, None)
     each = getattr(task, "controls_each", None)  # optional in the domain contract: all rows in one call
     if each is not None:
-        return each(values, randoms)
+        return each(values, randoms) if context is None else each(values, randoms, context=context)
     return np.concatenate([task.controls(values[j : j + 1], r) for j, r in enumerate(randoms)])
 
 

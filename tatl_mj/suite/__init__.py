@@ -29,7 +29,10 @@ import numpy as np
 
 from tatl_mj import plugins
 from tatl_mj.description import TaskDescription
-from tatl_mj.suite import bicycle, cartpole, gridworld, mountain_car, pendulum
+from tatl_mj.suite import bicycle, cartpole, contexts, gridworld, mountain_car, pendulum
+from tatl_mj.suite.contexts import ContextKey as ContextKey
+from tatl_mj.suite.contexts import ContextSampler as ContextSampler
+from tatl_mj.suite.contexts import ContextSpec
 
 DOMAINS: dict[str, ModuleType] = {
     "cartpole": cartpole,
@@ -161,6 +164,36 @@ def load(
                 f"of them) or a np.random.RandomState; got {random!r} ({error})"
             ) from None
     return factory(environment_kwargs=environment_kwargs, **kwargs)
+
+
+def context_spec(domain: str, task: str) -> ContextSpec:
+    """The context keys ``domain/task`` takes (its domain's ``CONTEXTS``; none if it declares none)."""
+    _factory(domain, task)
+    return getattr(_domain(domain), "CONTEXTS", {}).get(task, ContextSpec())
+
+
+def check_context(
+    domain: str, task: str, context: Any, task_kwargs: dict[str, Any] | None = None, where: str = "context"
+) -> dict[str, float]:
+    """The values of every context key of ``domain/task`` under ``context`` (a dict of key ->
+    number; ``task_kwargs`` and the factory's defaults fill the keys it leaves out).
+
+    Raises ValueError in one line naming the bad key and the valid keys with their
+    units and ranges; nothing is built.
+    """
+    spec = context_spec(domain, task)
+    label = f"{domain}/{task} {where}"
+    given = contexts.check(spec, context, label)
+    base = contexts.defaults(spec, _factory(domain, task), dict(task_kwargs or {}))
+    return contexts.full(spec, base, given, label)
+
+
+def task_kwargs_with_context(
+    domain: str, task: str, task_kwargs: dict[str, Any] | None, values: dict[str, float]
+) -> dict[str, Any]:
+    """``task_kwargs`` with the context ``values`` (checked by :func:`check_context`) written in,
+    for ``load``: the task built with that context."""
+    return contexts.task_kwargs_with(context_spec(domain, task), dict(task_kwargs or {}), values)
 
 
 def action_set(domain: str) -> np.ndarray:

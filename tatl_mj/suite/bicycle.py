@@ -62,6 +62,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from typing import Any, Sequence
 
 import mujoco
@@ -71,6 +72,7 @@ from scipy import optimize
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
+from tatl_mj.suite.contexts import ContextKey, ContextSpec
 
 # Benchmark geometry (Meijaard et al. 2007, Table 1).
 WHEELBASE = 1.02  # m
@@ -383,12 +385,14 @@ class Physics(common.StatePhysics):
         return float(self.named.data.actuator_force["steer_torque"])
 
 
-def control_vector(torque: Any, cg_offset: Any, speed: float) -> np.ndarray:
-    """(N, 4) ctrl rows: handlebar torque (N m), CG offset d (m) twice, speed set-point (m/s)."""
+def control_vector(torque: Any, cg_offset: Any, speed: Any) -> np.ndarray:
+    """(N, 4) ctrl rows: handlebar torque (N m), CG offset d (m) twice, speed set-point (m/s;
+    one for all rows, or one a row)."""
     torque, cg_offset = np.broadcast_arrays(
         np.atleast_1d(np.asarray(torque, np.float64)), np.atleast_1d(np.asarray(cg_offset, np.float64))
     )
-    return np.column_stack([torque, cg_offset, cg_offset, np.full(len(torque), float(speed))])
+    speeds = np.broadcast_to(np.asarray(speed, np.float64), torque.shape)
+    return np.column_stack([torque, cg_offset, cg_offset, speeds])
 
 
 class Task(common.StateTask):
@@ -438,18 +442,32 @@ class Task(common.StateTask):
         offset = random.uniform(-self.cg_noise, self.cg_noise, size=n) if self.cg_noise else np.zeros(n)
         return control_vector(torque[:, 0], offset, self.speed)
 
-    def controls_each(self, action_values: np.ndarray, randoms: Sequence[Any]) -> np.ndarray:
+    def controls_each(
+        self, action_values: np.ndarray, randoms: Sequence[Any], context: Mapping[str, np.ndarray] | None = None
+    ) -> np.ndarray:
         """``controls`` of each row with its own random stream: row i is what
         ``controls(action_values[i : i + 1], randoms[i])`` gives, drawing the same
-        numbers from ``randoms[i]``, for all rows in one call (evaluation episodes)."""
+        numbers from ``randoms[i]``, for all rows in one call (evaluation episodes).
+
+        ``context``: per-row ``cg_noise`` and ``speed`` (a vector env's contexts),
+        row i then being what a task with row i's values gives.
+        """
         torque = np.asarray(action_values, np.float64).reshape(-1, 1)
         if len(randoms) != len(torque):
             raise ValueError(f"controls_each needs one random stream per row, got {len(randoms)} for {len(torque)}")
-        if not self.cg_noise:
-            return control_vector(torque[:, 0], np.zeros(len(torque)), self.speed)
-        c = self.cg_noise
-        offset = np.concatenate([r.uniform(-c, c, size=1) for r in randoms]) if len(torque) else np.zeros(0)
-        return control_vector(torque[:, 0], offset, self.speed)
+        context = context or {}
+        speed = context.get("speed", self.speed)
+        if "cg_noise" not in context:
+            if not self.cg_noise:
+                return control_vector(torque[:, 0], np.zeros(len(torque)), speed)
+            c = self.cg_noise
+            offset = np.concatenate([r.uniform(-c, c, size=1) for r in randoms]) if len(torque) else np.zeros(0)
+            return control_vector(torque[:, 0], offset, speed)
+        noise = context["cg_noise"]
+        offset = np.zeros(len(torque))
+        for j in np.flatnonzero(noise):  # a row without noise draws nothing, as its task would
+            offset[j] = randoms[j].uniform(-noise[j], noise[j], size=1)[0]
+        return control_vector(torque[:, 0], offset, speed)
 
     def start_configurations(self, physics: Physics, n: int) -> tuple[np.ndarray, np.ndarray]:
         physics.set_target_speed(self.speed)  # qpos_qvel_from reads it
@@ -492,6 +510,22 @@ def balance(
 
 
 TASKS = {"balance": balance}
+
+CONTEXTS = {
+    "balance": ContextSpec(
+        (
+            ContextKey("speed", "m/s", 0.1, 20.0, "task", "forward speed the rear servo holds"),
+            ContextKey("cg_noise", "m", 0.0, MAX_CG_NOISE, "task", "rider CG offset drawn each step, up to"),
+            ContextKey("start_roll", "rad", 0.0, 0.2, "task", "start roll drawn within +-"),
+            ContextKey("rider_mass", "kg", 1.0, 84.0, "model", "rider's share of the 85 kg rear body", True),
+            ContextKey("tyre_friction", "-", 0.1, 3.0, "model", "tyre-floor sliding friction", True),
+            ContextKey("gravity", "m/s^2", 0.1, 30.0, "model", "gravitational acceleration", True),
+        ),
+        BicycleParams,
+    )
+}
+"""Context keys (``tatl_mj.suite.contexts``); the model keys are compiled into the MJCF model,
+so a vector env builds the model of each distinct value."""
 
 
 # --- Linear stability, measured on the MuJoCo model ---------------------------

@@ -47,6 +47,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
+from tatl_mj.suite.contexts import ContextKey, ContextSpec
 
 CONTROL_TIMESTEP = 0.02  # s, Gymnasium's tau
 DEFAULT_TIME_LIMIT = 10.0  # s, 500 control steps
@@ -166,6 +167,19 @@ def balance(
 
 
 TASKS = {"balance": balance}
+
+CONTEXTS = {
+    "balance": ContextSpec(
+        (
+            ContextKey("cart_mass", "kg", 0.1, 10.0, "model", "cart mass", True),
+            ContextKey("pole_mass", "kg", 0.01, 5.0, "model", "pole mass, a uniform rod", True),
+            ContextKey("pole_half_length", "m", 0.05, 5.0, "model", "hinge to pole centre of mass", True),
+            ContextKey("gravity", "m/s^2", 0.1, 30.0, "model", "gravitational acceleration", True),
+        ),
+        CartPoleParams,
+    )
+}
+"""Context keys (``tatl_mj.suite.contexts``); ``force_limit`` is not one: it sets the action space."""
 
 
 def describe(task: str, params: CartPoleParams | None = None, **_: Any) -> TaskDescription:

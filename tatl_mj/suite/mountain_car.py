@@ -78,6 +78,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
+from tatl_mj.suite.contexts import ContextKey, ContextSpec
 
 CONTROL_TIMESTEP = 0.014  # s; one RK4 physics step
 VELOCITY_SCALE = CONTROL_TIMESTEP  # v (m per control step) = x_dot (m/s) * this
@@ -338,6 +339,19 @@ def climb(
 
 
 TASKS = {"climb": climb}
+
+CONTEXTS = {
+    "climb": ContextSpec(
+        (
+            ContextKey("car_mass", "kg", 0.1, 10.0, "model", "car mass", True),
+            ContextKey("force", "N", 0.5, 50.0, "model", "full-throttle horizontal force", True),
+            ContextKey("gravity", "m/s^2", 0.1, 30.0, "model", "gravitational acceleration", True),
+            ContextKey("damping", "N s/m", 0.0, 10.0, "model", "viscous damping on x", True),
+        ),
+        MountainCarParams,
+    )
+}
+"""Context keys (``tatl_mj.suite.contexts``)."""
 
 
 def describe(task: str, **_: Any) -> TaskDescription:

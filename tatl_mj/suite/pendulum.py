@@ -41,7 +41,9 @@ Equation: ``(m L^2 + I) theta_dd = m g L sin(theta) + gear * u``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import mujoco
@@ -49,6 +51,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.suite import common
+from tatl_mj.suite.contexts import ContextKey, ContextSpec
 
 CONTROL_TIMESTEP = 0.05  # s
 DEFAULT_TIME_LIMIT = 10.0  # s, 200 control steps
@@ -90,6 +93,33 @@ def wrap_angle(theta: np.ndarray) -> np.ndarray:
     return np.mod(np.asarray(theta, np.float64) + np.pi, 2.0 * np.pi) - np.pi
 
 
+def write_pendulum(field: Callable[[str], np.ndarray], ids: Any, rows: Any, lengths: Any, masses: Any) -> None:
+    """Writes pendulums of ``lengths`` (m) and ``masses`` (kg) into rows ``rows`` of model fields.
+
+    ``field(name)`` is a model field with a leading axis of rows: one model's as one
+    row, or a ``mujoco.batch.Batch``'s per-simulation fields. ``ids`` are
+    :meth:`Physics.pendulum_ids`. Writes the mass properties and the geometry;
+    the caller then runs ``mj_setConst`` (a batch's ``set_const``) for the
+    derived fields. The same numbers as :meth:`Physics.set_pendulum` writes, in
+    the same operations.
+    """
+    pole, rod, tip = ids
+    lengths, masses = np.asarray(lengths, np.float64), np.asarray(masses, np.float64)
+    half = lengths / 2.0
+    rod_radius = field("geom_size")[rows, rod, 0]
+    field("body_mass")[rows, pole] = masses
+    field("body_inertia")[rows, pole] = (0.4 * masses * TIP_RADIUS**2)[..., None]
+    zeros = np.zeros_like(lengths)
+    field("body_ipos")[rows, pole] = np.stack([zeros, zeros, lengths], axis=-1)
+    field("geom_size")[rows, rod, 1] = half  # capsule half-length
+    field("geom_pos")[rows, rod] = np.stack([zeros, zeros, half], axis=-1)
+    field("geom_pos")[rows, tip] = np.stack([zeros, zeros, lengths], axis=-1)
+    # Bounding volumes, so rendering does not cull a lengthened rod.
+    field("geom_rbound")[rows, rod] = half + rod_radius
+    aabb = np.stack([zeros, zeros, zeros, zeros + rod_radius, zeros + rod_radius, half + rod_radius], axis=-1)
+    field("geom_aabb")[rows, rod] = aabb
+
+
 class Physics(common.StatePhysics):
     """Pendulum physics with the paper's state ``[theta, theta_dot]``."""
 
@@ -123,12 +153,25 @@ class Physics(common.StatePhysics):
         """Tip mass (kg)."""
         return float(self.named.model.body_mass["pole"])
 
+    def pendulum_ids(self) -> tuple[int, int, int]:
+        """Ids of the pole body, the rod geom and the tip geom (looked up once: the time-varying
+        task writes them every step, and named indexing costs several times the writes)."""
+        ids = getattr(self, "_pendulum_ids", None)
+        if ids is None:
+            ids = self._pendulum_ids = (
+                self.model.name2id("pole", "body"),
+                self.model.name2id("rod", "geom"),
+                self.model.name2id("tip", "geom"),
+            )
+        return ids
+
     def set_pendulum(self, length: float, mass: float) -> None:
         """Gives the pendulum a new length (m) and mass (kg) in the compiled model.
 
-        Writes the mass properties and the geometry, then refreshes derived model
-        fields with ``mj_setConst`` on a scratch MjData, so qpos, qvel and the rest
-        of the live state are untouched; no recompiling. Ends with ``forward()``,
+        Writes the mass properties and the geometry (as :func:`write_pendulum` does
+        for many), then refreshes derived model fields with ``mj_setConst`` on a
+        scratch MjData, so qpos, qvel and the rest of the live state are
+        untouched; no recompiling. Ends with ``forward()``,
         so positions derived from the state (what a render shows) match the new
         geometry at once.
         """
@@ -141,16 +184,9 @@ class Physics(common.StatePhysics):
             ):
                 raise ValueError(f"set_pendulum {name} must be a finite number > 0, got {value!r}")
         length, mass = float(length), float(mass)
-        # Raw arrays at ids looked up once: the time-varying task calls this every step,
-        # and named indexing costs several times the writes.
-        ids = getattr(self, "_pendulum_ids", None)
-        if ids is None:
-            ids = self._pendulum_ids = (
-                self.model.name2id("pole", "body"),
-                self.model.name2id("rod", "geom"),
-                self.model.name2id("tip", "geom"),
-            )
-        pole, rod, tip = ids
+        # Scalar writes, not write_pendulum's arrays: the time-varying task's environment calls
+        # this every step, at half the cost (tests/test_vector.py checks that both agree).
+        pole, rod, tip = self.pendulum_ids()
         model = self.model.ptr
         model.body_mass[pole] = mass
         model.body_inertia[pole] = 0.4 * mass * TIP_RADIUS**2
@@ -192,11 +228,13 @@ class Task(common.StateTask):
         timevarying: bool = False,
         random: Any = None,
         amplitude: float = SCHEDULE_AMPLITUDE,
+        flipped: bool = False,
     ) -> None:
         super().__init__(random=random)
         self.params = params
         self.timevarying = timevarying
         self.amplitude = amplitude
+        self.flipped = flipped  # the actuator's gear is -gain, not gain
         # The model changes every step, so mujoco.rollout cannot replay it.
         self.rollout_compatible = not timevarying
         self.step_index = 0
@@ -226,6 +264,40 @@ class Task(common.StateTask):
     def batch_reward(self, states: np.ndarray) -> np.ndarray:
         s = np.asarray(states, np.float64)
         return -10.0 * s[:, 0] ** 2 - 5.0 * s[:, 1] ** 2
+
+    def write_models(
+        self,
+        physics: Physics,
+        field: Callable[[str], np.ndarray],
+        ids: np.ndarray,
+        values: Mapping[str, np.ndarray],
+        steps: np.ndarray,
+    ) -> None:
+        """Writes into rows ``ids`` of a batch of ``physics``'s model (its per-simulation fields, ``field(name)``) the
+        model each row's context ``values`` (arrays over ``ids``, every key of ``CONTEXTS``)
+        gives at its episode's control step ``steps``: what :func:`make_physics` and
+        :meth:`model_for_step` make, without building a physics per context. The caller
+        then runs the batch's ``set_const`` for the derived fields."""
+        lengths, masses = values["length"], values["mass"]
+        if self.timevarying:
+            # timevarying_schedule's numbers: math.cos per step, as the environment takes them.
+            wave = values["amplitude"] * _schedule_cosines(int(steps.max()) + 1)[steps]
+            lengths, masses = lengths + wave, masses + wave
+        write_pendulum(field, physics.pendulum_ids(), ids, lengths, masses)
+        field("opt.gravity")[ids, 2] = -values["gravity"]
+        if "gain" in values:
+            field("actuator_gear")[ids, 0, 0] = -values["gain"] if self.flipped else values["gain"]
+
+
+def _schedule_cosines(n: int) -> np.ndarray:
+    """``cos(pi i / 50)`` of control steps 0 .. n - 1 (at least), by ``math.cos`` as
+    :func:`timevarying_schedule` computes them (numpy's cosine may differ in the last bit)."""
+    return _cosines(max(256, 1 << (n - 1).bit_length()))
+
+
+@functools.lru_cache(maxsize=None)
+def _cosines(n: int) -> np.ndarray:
+    return np.array([math.cos(math.pi * i / (SCHEDULE_PERIOD_STEPS / 2)) for i in range(n)])
 
 
 def _environment(
@@ -288,7 +360,8 @@ def swingup_flipped(
     if not (math.isfinite(gain) and gain > 0):
         raise ValueError(f"gain must be a number > 0, got {gain!r}")
     physics = make_physics(params, flipped=True, gain=gain)
-    return _environment(physics, Task(as_params(params), random=random), time_limit, environment_kwargs)
+    task = Task(as_params(params), random=random, flipped=True)
+    return _environment(physics, task, time_limit, environment_kwargs)
 
 
 def as_params(params: PendulumParams | None) -> PendulumParams:
@@ -299,6 +372,31 @@ def as_params(params: PendulumParams | None) -> PendulumParams:
         raise ValueError(f"params must be a PendulumParams, got {type(params).__name__}")
     return params
 
+
+def _amplitude_below_mass_and_length(values: Mapping[str, float]) -> None:
+    for name in ("length", "mass"):
+        if values[name] <= values["amplitude"]:
+            raise ValueError(f"{name} {values[name]:g} must exceed the amplitude {values['amplitude']:g}")
+
+
+_PHYSICAL = (
+    ContextKey("mass", "kg", 0.1, 10.0, "model", "tip mass", in_params=True),
+    ContextKey("length", "m", 0.1, 10.0, "model", "hinge to tip centre", in_params=True),
+    ContextKey("gravity", "m/s^2", 0.1, 30.0, "model", "gravitational acceleration", in_params=True),
+)
+CONTEXTS = {
+    "swingup": ContextSpec(_PHYSICAL, PendulumParams),
+    "swingup_timevarying": ContextSpec(
+        (*_PHYSICAL, ContextKey("amplitude", "m and kg", 0.0, 5.0, "task", "swing of length and mass")),
+        PendulumParams,
+        _amplitude_below_mass_and_length,
+    ),
+    "swingup_flipped": ContextSpec(
+        (*_PHYSICAL, ContextKey("gain", "N m per unit of control", 0.05, 20.0, "model", "flipped torque gain")),
+        PendulumParams,
+    ),
+}
+"""Context keys by task (``tatl_mj.suite.contexts``); ``max_torque`` is not one: it sets the action space."""
 
 TASKS = {
     "swingup": swingup,
