@@ -18,7 +18,7 @@ import sys
 import numpy as np
 
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.experiments.run import pipeline
+from tatl_mj.experiments.run import determinism, evaluation, problems, sides, source_unit
 from tatl_mj.transfer.methods.target_fqi import RL
 
 SAMPLES = 50_000
@@ -32,21 +32,21 @@ def main(paths: list[str]) -> None:
             returns = []
             for seed in SEEDS:
                 learner = RL(**spec.methods["rl"])
-                problem = pipeline.transfer_problem(spec, preset, _no_source(spec, preset), seed)
+                problem = problems.transfer_problem(spec, preset, _no_source(spec, preset), seed)
                 policy = learner.learn(problem, problem.reset_samples(SAMPLES))
-                seed_eval = pipeline.derive_seed(seed, spec.stream_name, "evaluation")
-                returns.append(float(np.mean(pipeline.target_returns(spec, preset, policy, seed_eval)[0])))
+                seed_eval = determinism.derive_seed(seed, spec.stream_name, "evaluation")
+                returns.append(float(np.mean(evaluation.target_returns(spec, preset, policy, seed_eval)[0])))
             print(f"{path} [presets.{name}] reference_return = {np.mean(returns):.0f}  # seeds 0-4: {returns}")
 
 
-def _no_source(spec: spec_mod.ExperimentSpec, preset: spec_mod.Preset) -> pipeline.SourceArtifacts:
+def _no_source(spec: spec_mod.ExperimentSpec, preset: spec_mod.Preset) -> source_unit.SourceArtifacts:
     """Artifacts with no source: the reference learner never looks at one."""
-    from tatl_mj.transfer.alignment import IdentityMapping
     from tatl_mj.transfer.fqi import ZeroQ
+    from tatl_mj.transfer.intertask_mapping import IdentityMapping
 
-    n_actions = pipeline.description_of(spec.target).n_actions
-    stream = pipeline.random_transitions(spec.target, 10, 0)
-    return pipeline.SourceArtifacts(ZeroQ(n_actions), IdentityMapping(), stream, 0.0, 0, 0, 0, {})
+    n_actions = sides.description_of(spec.target).n_actions
+    stream = sides.random_transitions(spec.target, 10, 0)
+    return source_unit.SourceArtifacts(ZeroQ(n_actions), IdentityMapping(), stream, 0.0, 0, 0, 0, {})
 
 
 if __name__ == "__main__":

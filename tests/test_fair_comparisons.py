@@ -14,11 +14,11 @@ from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments.results import verdicts
-from tatl_mj.experiments.run import pipeline
+from tatl_mj.experiments.run import determinism, evaluation, method_unit, problems, sides, source_unit
 from tatl_mj.transfer import registry, roles
-from tatl_mj.transfer.alignment import IdentityMapping
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
+from tatl_mj.transfer.intertask_mapping import IdentityMapping
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.methods.model_based import ApprenticeFQI
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
@@ -129,12 +129,12 @@ def flipped():
     table["source_learning"]["iterations"] = 5
     spec = spec_mod.parse_spec(table, "ip_to_flipped_ip.toml")
     preset = spec.preset("tiny")
-    return spec, preset, pipeline.learn_source(spec, preset, 0)
+    return spec, preset, source_unit.learn_source(spec, preset, 0)
 
 
 def test_reset_protocol_data_cover_the_box(flipped):
     spec, preset, artifacts = flipped
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0)
     data = problem.reset_samples(4000)
     low, high = problem.target.reset_low, problem.target.reset_high
     assert np.all(data.states >= low) and np.all(data.states <= high)
@@ -153,13 +153,13 @@ def test_reset_protocol_data_cover_the_box(flipped):
 
 def test_target_transitions_count_algorithm_2s_rollouts(flipped):
     spec, preset, artifacts = flipped
-    record = pipeline.run_method(spec, preset, 0, "ta-tl", artifacts)
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    record = method_unit.run_method(spec, preset, 0, "ta-tl", artifacts)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0)
     # By hand: the projected source policy's episodes (Algorithm 2's k trials) from its own starts.
     k = spec.methods["ta-tl"].get("utility_episodes", preset.evaluation_episodes)
-    starts_seed = pipeline.derive_seed(0, spec.name, "algorithm2-starts")
+    starts_seed = determinism.derive_seed(0, spec.name, "algorithm2-starts")
     trials = dataclasses.replace(preset, evaluation_episodes=k)
-    _, lengths = pipeline.target_returns(spec, trials, problem.projected_source_policy(), starts_seed)
+    _, lengths = evaluation.target_returns(spec, trials, problem.projected_source_policy(), starts_seed)
     rollout = int(lengths.sum())
     assert rollout == k * preset.evaluation_steps  # the pendulum never ends early
     for point in record["curve"]:
@@ -167,19 +167,19 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
         assert point["rollout_transitions"] == rollout  # the paper does not count these
     # Algorithm 2's k trials as a setting: two episodes of U_M charge two episodes' steps.
     two = registry.resolve("ta-tl-k2", {"method": "ta-tl", "zeta": 0.1, "utility_episodes": 2})
-    record = pipeline.run_method(spec, preset, 0, "ta-tl-k2", artifacts, transfer=two)
+    record = method_unit.run_method(spec, preset, 0, "ta-tl-k2", artifacts, transfer=two)
     assert {p["rollout_transitions"] for p in record["curve"]} == {2 * preset.evaluation_steps}
     # zeta = "none" in a spec: Algorithm 2 off, every sample used, nothing rolled out.
     off = registry.resolve("ta-tl-all", {"method": "ta-tl", "zeta": "none"})
     assert off.zeta is None
-    record = pipeline.run_method(spec, preset, 0, "ta-tl-all", artifacts, transfer=off)
+    record = method_unit.run_method(spec, preset, 0, "ta-tl-all", artifacts, transfer=off)
     assert [p["samples_used"] for p in record["curve"]] == list(preset.target_budgets)
     assert [p["target_transitions"] for p in record["curve"]] == list(preset.target_budgets)
     assert {p["rollout_transitions"] for p in record["curve"]} == {0}
     # A method without hooks counts its samples; one drawing its own data counts those.
-    rl = pipeline.run_method(spec, preset, 0, "rl", artifacts)
+    rl = method_unit.run_method(spec, preset, 0, "rl", artifacts)
     assert [p["target_transitions"] for p in rl["curve"]] == list(preset.target_budgets)
-    reset = pipeline.run_method(spec, preset, 0, "rl-reset", artifacts)
+    reset = method_unit.run_method(spec, preset, 0, "rl-reset", artifacts)
     assert [p["target_transitions"] for p in reset["curve"]] == list(preset.target_budgets)
     assert reset["data"] == "reset" and rl["data"] == "shared"
 
@@ -187,7 +187,7 @@ def test_target_transitions_count_algorithm_2s_rollouts(flipped):
 def test_algorithm_2_compares_both_utilities_from_its_own_starts(flipped):
     """With the real simulator as the 'model', U_Mhat equals U_M: same starts, same reward."""
     spec, preset, artifacts = flipped
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0)
     exact = types.SimpleNamespace(
         predict=lambda s, a: sampling.step_values_from("pendulum", "swingup_flipped", s, np.asarray(a))
     )
@@ -201,10 +201,10 @@ def test_algorithm_2_compares_both_utilities_from_its_own_starts(flipped):
     # Those starts are not the evaluation's.
     n = preset.evaluation_episodes
     evaluation = sampling.start_states(
-        "pendulum", "swingup_flipped", n, pipeline.derive_seed(0, spec.name, "evaluation")
+        "pendulum", "swingup_flipped", n, determinism.derive_seed(0, spec.name, "evaluation")
     )
     own = sampling.start_states(
-        "pendulum", "swingup_flipped", n, pipeline.derive_seed(0, spec.name, "algorithm2-starts")
+        "pendulum", "swingup_flipped", n, determinism.derive_seed(0, spec.name, "algorithm2-starts")
     )
     assert not np.allclose(evaluation, own)
 
@@ -227,7 +227,7 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
     """From hanging, random-policy episodes never come near upright; epsilon-greedy
     episodes of the refitted policy do, and its policy beats the shared-stream RL's."""
     spec, preset, artifacts = flipped
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0)
     collected = []
 
     def recording(policy, n, round_):
@@ -235,7 +235,7 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
         collected.append(data)
         return data
 
-    stream = pipeline.random_transitions(spec.target, 3000, 5)  # the random-policy data of the same size
+    stream = sides.random_transitions(spec.target, 3000, 5)  # the random-policy data of the same size
     method = RL(**spec.methods["rl"], data="online", online_batch=200)
     online = method.learn(dataclasses.replace(problem, episode_samples=recording), stream)
     assert [len(c) for c in collected] == [200, 200, 400, 800, 1400]
@@ -243,10 +243,10 @@ def test_online_fqi_reaches_what_random_data_never_do(flipped):
     assert np.any(np.abs(np.concatenate([c.states for c in collected[1:]])[:, 0]) < 0.5)
     assert not np.any(np.abs(stream.states[:, 0]) < 0.5)
     shared = RL(**spec.methods["rl"]).learn(problem, stream)
-    seed = pipeline.derive_seed(0, spec.name, "evaluation")
+    seed = determinism.derive_seed(0, spec.name, "evaluation")
     assert (
-        pipeline.target_returns(spec, preset, online, seed)[0].mean()
-        > pipeline.target_returns(spec, preset, shared, seed)[0].mean()
+        evaluation.target_returns(spec, preset, online, seed)[0].mean()
+        > evaluation.target_returns(spec, preset, shared, seed)[0].mean()
     )
 
 
@@ -259,13 +259,13 @@ def test_which_pendulum_streams_come_near_upright(name, reaches):
     transitions, and they do bring the time-varying one there, on each of six seeds."""
     target = spec_mod.load_spec(ROOT / "tasks" / f"{name}.toml").target
     for seed in range(6):
-        states = pipeline.random_transitions(target, 1000, seed).states
+        states = sides.random_transitions(target, 1000, seed).states
         assert np.any(np.abs(states[:, 0]) < 0.5) == reaches, seed
 
 
 def test_the_source_action_is_chosen_where_the_source_is_queried(flipped):
     spec, preset, artifacts = flipped
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0)
     far = np.array([[0.5, 30.0], [-2.0, -25.0]])  # faster than the source's FQI box (+-8 rad/s)
     mapped = problem.mapping.chi_plus(far)
     np.testing.assert_allclose(mapped, [[0.5, 8.0], [-2.0, -8.0]])
@@ -332,7 +332,7 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
 
     spec = tiny_spec()
     preset = spec.preset("tiny")
-    target = pipeline.description_of(spec.target)
+    target = sides.description_of(spec.target)
     rows = []
 
     def policy(states):
@@ -345,8 +345,8 @@ def test_a_policy_learned_at_several_budgets_is_evaluated_once_with_the_same_poi
         | {"learn_s": 0.0, "warnings": []}
         for b in (40, 120, 200)
     ]
-    curve = pipeline._evaluated_curve(spec, preset, target, points, [policy, other, policy], eval_seed=3)
-    alone = pipeline._evaluated_curve(spec, preset, target, points[:1], [policy], eval_seed=3)
+    curve = method_unit._evaluated_curve(spec, preset, target, points, [policy, other, policy], eval_seed=3)
+    alone = method_unit._evaluated_curve(spec, preset, target, points[:1], [policy], eval_seed=3)
     # Each step asks the policy for its own episodes' actions once, not once per budget.
     assert sum(rows) == 2 * sum(alone[0]["steps"])
     assert [curve[0][k] for k in ("returns", "steps")] == [curve[2][k] for k in ("returns", "steps")]

@@ -207,13 +207,13 @@ def test_algorithm_2_runs_on_the_grid():
     from conftest import ROOT
 
     from tatl_mj.experiments import spec as spec_mod
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import problems, source_unit
 
     table = tomllib.loads((ROOT / "tasks" / "grid_to_windy.toml").read_text())
     experiment = spec_mod.parse_spec(table, "grid_to_windy.toml")
     preset = experiment.preset("smoke")
-    artifacts = pipeline.learn_source(experiment, preset, 0)
-    problem = pipeline.transfer_problem(experiment, preset, artifacts, 0)
+    artifacts = source_unit.learn_source(experiment, preset, 0)
+    problem = problems.transfer_problem(experiment, preset, artifacts, 0)
     assert problem.has_utility_gap
 
     class TableModel:  # a known tabular model as an apprentice-like model

@@ -8,7 +8,7 @@ from conftest import ROOT, TINY
 
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments.results import verdicts
-from tatl_mj.experiments.run import pipeline
+from tatl_mj.experiments.run import determinism, method_unit, problems, source_unit
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import make_features
 from tatl_mj.transfer.fqi import LinearQ, TreeQ
@@ -83,12 +83,12 @@ def test_a_placebo_variant_runs_in_a_batch_on_its_own_source():
     table["methods"]["ta-tl-placebo"].update(method="ta-tl", source="placebo")
     spec = spec_mod.parse_spec(table, "ip_to_flipped_ip.toml")
     preset = spec.preset("tiny")
-    artifacts = pipeline.learn_source(spec, preset, 0)
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0, placebo=True)
-    expected = placebo_q(artifacts.source_q, pipeline.derive_seed(0, spec.name, "placebo"))
+    artifacts = source_unit.learn_source(spec, preset, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0, placebo=True)
+    expected = placebo_q(artifacts.source_q, determinism.derive_seed(0, spec.name, "placebo"))
     np.testing.assert_array_equal(problem.source_q.weights, expected.weights)
-    trained = pipeline.run_method(spec, preset, 0, "ta-tl", artifacts)
-    placebo = pipeline.run_method(spec, preset, 0, "ta-tl-placebo", artifacts)
+    trained = method_unit.run_method(spec, preset, 0, "ta-tl", artifacts)
+    placebo = method_unit.run_method(spec, preset, 0, "ta-tl-placebo", artifacts)
     assert placebo["curve"][0]["returns"] != trained["curve"][0]["returns"]
-    again = pipeline.run_method(spec, preset, 0, "ta-tl-placebo", artifacts)
+    again = method_unit.run_method(spec, preset, 0, "ta-tl-placebo", artifacts)
     assert again["curve"][0]["returns"] == placebo["curve"][0]["returns"]  # the same placebo from the same seed

@@ -122,21 +122,52 @@ def test_every_record_written_names_the_current_schema(tmp_path):
 
 
 def test_a_source_cache_pickled_before_a_module_moved_is_read_at_its_new_home():
-    # A run folder started before experiments/ was split names its classes by their old
-    # modules; resuming it must read them (protocol 0 writes module paths as plain lines).
-    from tatl_mj.experiments.run import pipeline
-    from tatl_mj.transfer import mappings
+    # A run folder started before experiments/ was split, or before run/pipeline.py and
+    # transfer/alignment.py were split in parts, names its classes by their old modules;
+    # resuming it must read them (protocol 0 writes module paths as plain lines).
+    import functools
+    import importlib
 
-    mapping = mappings.MAPPINGS[sorted(mappings.MAPPINGS)[0]]
-    artifacts = pipeline.SourceArtifacts(
-        source_q=None, mapping=mapping, target_stream=None, random_return=-1.0, mapping_target_samples=0,
+    import numpy as np
+
+    from tatl_mj.experiments.run import problems, source_unit
+    from tatl_mj.transfer import mappings
+    from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping
+    from tatl_mj.transfer.manifold_alignment import LinearAlignment
+    from tatl_mj.transfer.transition_alignment import TransitionAlignment
+
+    for (_, name), new in records.MOVED_NAMES.items():
+        assert hasattr(importlib.import_module(new), name), (name, new)
+    eye, zero = np.eye(2), np.zeros(2)
+    kept = [
+        mappings.MAPPINGS[sorted(mappings.MAPPINGS)[0]],
+        IdentityMapping(),
+        AffineMapping(2 * eye, zero + 1),
+        LinearAlignment(zero, eye, zero, eye, eye, -eye, zero),
+        TransitionAlignment(n_neighbors=5),
+        problems.QueriedMapping(IdentityMapping(), functools.partial(problems._source_region, None, None)),
+    ]
+    artifacts = source_unit.SourceArtifacts(
+        source_q=None, mapping=kept, target_stream=None, random_return=-1.0, mapping_target_samples=0,
         mapping_source_samples=0, source_samples=3, timings={},
     )  # fmt: skip
-    blob = pickle.dumps(artifacts, protocol=0)
-    for old, new in records.MOVED_MODULES.items():
-        blob = blob.replace(f"c{new}\n".encode(), f"c{old}\n".encode())
-    assert b"ctatl_mj.experiments.pipeline\n" in blob
-    with pytest.raises(ModuleNotFoundError):
-        pickle.loads(blob)
-    read = records.load_blob(blob)
-    assert type(read) is pipeline.SourceArtifacts and read.source_samples == 3 and read.mapping is mapping
+    split = pickle.dumps(artifacts, protocol=0)
+    for (old, name), new in records.MOVED_NAMES.items():  # as written before the parts were split
+        split = split.replace(f"c{new}\n{name}\n".encode(), f"c{old}\n{name}\n".encode())
+    assert b"ctatl_mj.experiments.run.pipeline\nSourceArtifacts\n" in split
+    assert b"ctatl_mj.transfer.alignment\nLinearAlignment\n" in split
+    moved = split
+    for old, new in records.MOVED_MODULES.items():  # and before experiments/ was split
+        moved = moved.replace(f"c{new}\n".encode(), f"c{old}\n".encode())
+    assert b"ctatl_mj.experiments.pipeline\nSourceArtifacts\n" in moved
+    for blob in (split, moved):
+        with pytest.raises(ModuleNotFoundError):
+            pickle.loads(blob)
+        read = records.load_blob(blob)
+        assert type(read) is source_unit.SourceArtifacts and read.source_samples == 3
+        assert read.mapping[0] is kept[0]
+        assert [type(m) for m in read.mapping] == [type(m) for m in kept]
+        np.testing.assert_array_equal(read.mapping[2].chi(eye), kept[2].chi(eye))
+        np.testing.assert_array_equal(read.mapping[3].chi_plus(eye), kept[3].chi_plus(eye))
+        assert read.mapping[4] == kept[4]
+        assert read.mapping[5].region.func is problems._source_region

@@ -164,7 +164,7 @@ def test_ray_executor_matches_local(tmp_path):
 
 
 def test_affine_mapping_equal_to_identity_gives_identical_results():
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import method_unit, source_unit
 
     identity = tiny_spec()
     table = tomllib.loads((ROOT / "tasks" / "ip_to_flipped_ip.toml").read_text())
@@ -173,8 +173,8 @@ def test_affine_mapping_equal_to_identity_gives_identical_results():
     table["mapping"] = {"kind": "affine", "matrix": [[1.0, 0.0], [0.0, 1.0]]}
     affine = spec_mod.parse_spec(table, "affine.toml")
     preset = identity.preset("tiny")
-    a = pipeline.run_method(identity, preset, 0, "ta-tl", pipeline.learn_source(identity, preset, 0))
-    b = pipeline.run_method(affine, preset, 0, "ta-tl", pipeline.learn_source(affine, preset, 0))
+    a = method_unit.run_method(identity, preset, 0, "ta-tl", source_unit.learn_source(identity, preset, 0))
+    b = method_unit.run_method(affine, preset, 0, "ta-tl", source_unit.learn_source(affine, preset, 0))
     # The affine map works in the pendulum's mapping coordinates (angle from hanging), which
     # shifts and wraps angles on the way in and out: equal up to rounding.
     np.testing.assert_allclose([p["returns"] for p in a["curve"]], [p["returns"] for p in b["curve"]], rtol=1e-12)
@@ -192,7 +192,7 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
     import numpy as np
 
     from tatl_mj.experiments.report import clips
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import determinism, evaluation
 
     spec = tiny_spec()
     runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False)
@@ -201,7 +201,9 @@ def test_clip_policy_is_the_evaluated_policy(tmp_path):
     for name in spec.methods:
         recorded = json.loads(records.RunDirectory(tmp_path).record_path(spec.name, 0, name).read_text())
         policy = clips.clip_policy(spec, "tiny", 0, name, artifacts)
-        returns, _ = pipeline.target_returns(spec, preset, policy, pipeline.derive_seed(0, spec.name, "evaluation"))
+        returns, _ = evaluation.target_returns(
+            spec, preset, policy, determinism.derive_seed(0, spec.name, "evaluation")
+        )
         assert list(returns) == recorded["curve"][-1]["returns"], name
         states = artifacts.target_stream.states[:50]
         again = clips.clip_policy(spec, "tiny", 0, name, artifacts)
@@ -231,13 +233,13 @@ def test_each_experiment_runs_and_reports_its_own_methods(tmp_path):
 
 @pytest.mark.parametrize("variant", ["mc_to_ip_triplets", "mc_to_ip_energy"])
 def test_learned_and_given_maps_are_recorded_with_their_coefficients(variant):
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import source_unit
 
     experiment = spec_mod.load_spec(ROOT / "tasks" / "variants" / f"{variant}.toml")  # resolves its extends
     tiny = spec_mod.Preset(**{**TINY, "target_budgets": tuple(TINY["target_budgets"]), "alignment_samples": 200})
     learner = dataclasses.replace(experiment.source_learning, iterations=5)
     experiment = dataclasses.replace(experiment, presets={"tiny": tiny}, source_learning=learner)
-    artifacts = pipeline.learn_source(experiment, experiment.preset("tiny"), 0)
+    artifacts = source_unit.learn_source(experiment, experiment.preset("tiny"), 0)
     record = artifacts.mapping_record
     assert np.shape(record["matrix"]) == (2, 2) and len(record["offset"]) == 2
     json.dumps(record)  # it goes into source.json as it is
@@ -265,7 +267,7 @@ def test_a_variant_runs_under_its_own_name_and_equals_its_built_in(tmp_path):
 
 def test_paper_protocol_data_are_collected_once_and_nest_across_budgets():
     # Each budget's head of one largest collection is exactly a fresh collection of that size.
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import problems
 
     spec = spec_mod.load_spec(ROOT / "tasks" / "grid_to_windy.toml")
 
@@ -276,11 +278,11 @@ def test_paper_protocol_data_are_collected_once_and_nest_across_budgets():
 
     def collect(pol, n):
         calls.append(n)
-        return pipeline._policy_samples(spec, 0, pol, n)
+        return problems._policy_samples(spec, 0, pol, n)
 
-    nested = pipeline._nested_samples(collect, 300)
+    nested = problems._nested_samples(collect, 300)
     for n in (37, 120, 300):
-        got, fresh = nested(policy, n), pipeline._policy_samples(spec, 0, policy, n)
+        got, fresh = nested(policy, n), problems._policy_samples(spec, 0, policy, n)
         for field in dataclasses.fields(fresh):
             np.testing.assert_array_equal(getattr(got, field.name), getattr(fresh, field.name), err_msg=field.name)
     assert calls == [300]

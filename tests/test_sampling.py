@@ -328,9 +328,9 @@ def test_mujoco_threads_sets_the_default_thread_count_and_not_the_numbers():
 
 
 def test_a_unit_steps_mujoco_on_one_thread():
-    from tatl_mj.experiments.run import pipeline
+    from tatl_mj.experiments.run import determinism
 
-    with pipeline.one_thread():
+    with determinism.one_thread():
         assert simulator.simulator_for("pendulum", "swingup", None, None).n_threads == 1
     assert simulator.simulator_for("pendulum", "swingup", None, None).n_threads == 2
 

@@ -8,7 +8,7 @@ from conftest import tiny_spec
 
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments.results import records
-from tatl_mj.experiments.run import pipeline, runner
+from tatl_mj.experiments.run import method_unit, problems, runner, source_unit
 from tatl_mj.experiments.spec import MappingSpec
 from tatl_mj.transfer import method, registry
 
@@ -38,14 +38,14 @@ def test_source_free_built_ins_declare_it_and_transfer_methods_do_not():
 def test_a_method_without_a_source_is_handed_none():
     spec = tiny_spec()
     preset = spec.preset("tiny")
-    artifacts = pipeline.learn_source(spec, preset, 0)
-    problem = pipeline.transfer_problem(spec, preset, artifacts, 0, uses_source=False)
+    artifacts = source_unit.learn_source(spec, preset, 0)
+    problem = problems.transfer_problem(spec, preset, artifacts, 0, uses_source=False)
     for field in ("source_q", "mapping", "source_step"):
         with pytest.raises(method.SourceWithheld, match=f"problem.{field} was read"):
             getattr(problem, field).values if field == "source_q" else getattr(problem, field)(None)
     with pytest.raises(method.SourceWithheld):
         problem.projected_source_policy()(artifacts.target_stream.states[:1])
-    record = pipeline.run_method(spec, preset, 0, "rl", artifacts)  # learns without reading them
+    record = method_unit.run_method(spec, preset, 0, "rl", artifacts)  # learns without reading them
     assert record["mapping_target_samples"] == 0 and len(record["curve"]) == 2
 
 
@@ -90,8 +90,8 @@ def test_a_lost_copy_or_origin_comes_back_without_recomputing(tmp_path, monkeypa
     copy, origin = folder.record_path(variant.name, 0, "rl"), folder.record_path(parent.name, 0, "rl")
     before = {p: _result(records.read_json(p)) for p in (copy, origin)}
     computed = []
-    real = pipeline.run_method
-    monkeypatch.setattr(pipeline, "run_method", lambda *a, **k: computed.append(a[3]) or real(*a, **k))
+    real = method_unit.run_method
+    monkeypatch.setattr(method_unit, "run_method", lambda *a, **k: computed.append(a[3]) or real(*a, **k))
     for lost in (copy, origin):
         lost.unlink()
         run()
@@ -105,7 +105,7 @@ def test_a_failed_unit_skips_the_experiments_that_share_it(tmp_path, monkeypatch
     def fail(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(pipeline, "run_method", fail)
+    monkeypatch.setattr(method_unit, "run_method", fail)
     with pytest.raises(runner.RunFailed) as caught:
         runner.run([parent, variant], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl"])
     assert (caught.value.failed, caught.value.skipped) == (1, 1)
@@ -151,8 +151,8 @@ def test_a_lost_source_unit_takes_the_first_experiments_artefacts_again(tmp_path
         k: v for k, v in records.read_json(folder.record_path(variant.name, 0, "source")).items() if k not in costs
     }
     learned = []
-    real = pipeline.learn_source
-    monkeypatch.setattr(pipeline, "learn_source", lambda *a: learned.append(a[0].name) or real(*a))
+    real = source_unit.learn_source
+    monkeypatch.setattr(source_unit, "learn_source", lambda *a: learned.append(a[0].name) or real(*a))
     folder.record_path(variant.name, 0, "source").unlink()
     run()
     after = records.read_json(folder.record_path(variant.name, 0, "source"))

@@ -9,7 +9,7 @@ from conftest import ROOT, TINY
 from tatl_mj import suite
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments.results import summary
-from tatl_mj.experiments.run import pipeline
+from tatl_mj.experiments.run import evaluation, method_unit, source_unit
 from tatl_mj.suite import bicycle
 
 
@@ -19,7 +19,7 @@ def test_per_episode_assigns_lockstep_rows_to_their_episodes():
     for t, live in enumerate([[0, 1, 2], [0, 2], [0]]):
         states = np.array([[10.0 * i + t, 0.0] for i in live])
         calls.append((states, -states[:, :1]))
-    states, values = pipeline.per_episode(calls, np.array([3, 1, 2]))
+    states, values = evaluation.per_episode(calls, np.array([3, 1, 2]))
     assert [s[:, 0].tolist() for s in states] == [[0, 1, 2], [10], [20, 21]]
     assert [v[:, 0].tolist() for v in values] == [[0, -1, -2], [-10], [-20, -21]]
 
@@ -29,7 +29,7 @@ def test_steadiness_is_the_rms_of_the_declared_states_and_the_mean_clipped_actio
     assert description.steadiness == ("roll",)
     states = [np.array([[0, 0, 0.3, 0], [0, 0, -0.4, 0]]), np.array([[0, 0, 0.1, 0]])]
     values = [np.array([[1.0], [-5.0]]), np.array([[0.5]])]  # -5 N m is clipped to the 2 N m limit
-    out = pipeline.steadiness(description, states, values)
+    out = evaluation.steadiness(description, states, values)
     assert out["roll_rms"] == pytest.approx([np.sqrt((0.09 + 0.16) / 2), 0.1])
     assert out["mean_abs_action"] == pytest.approx([1.5, 0.5])
     with pytest.raises(ValueError, match=r"steadiness names \['tilt'\], not states"):
@@ -44,7 +44,7 @@ def test_bicycle_records_carry_each_episodes_steadiness_within_the_fall_limit():
     table.pop("best_baseline", None)  # names methods this test leaves out
     spec = spec_mod.parse_spec(table, "cartpole_to_bicycle.toml")
     preset = spec.preset("tiny")
-    record = pipeline.run_method(spec, preset, 0, "projected-source", pipeline.learn_source(spec, preset, 0))
+    record = method_unit.run_method(spec, preset, 0, "projected-source", source_unit.learn_source(spec, preset, 0))
     point = record["curve"][0]
     steady = point["steadiness"]
     assert len(steady["roll_rms"]) == len(steady["mean_abs_action"]) == preset.evaluation_episodes

@@ -1,9 +1,10 @@
-"""Known answers for the inter-task mappings (tatl_mj.transfer.alignment)."""
+"""Known answers for the inter-task mappings (tatl_mj.transfer.intertask_mapping, manifold_alignment)."""
 
 import numpy as np
 import pytest
 
-from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping, Mapping, align_manifolds
+from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping, Mapping
+from tatl_mj.transfer.manifold_alignment import align_manifolds
 
 
 def _known_map() -> np.ndarray:

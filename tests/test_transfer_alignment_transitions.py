@@ -1,18 +1,13 @@
-"""Known answers for the transition-aware mapping (alignment.align_transitions)."""
+"""Known answers for the transition-aware mapping (transition_alignment.align_transitions)."""
 
 import numpy as np
 import pytest
 
-from tatl_mj.transfer.alignment import (
-    AffineMapping,
-    Mapping,
-    TransitionAlignment,
-    align_manifolds,
-    align_transitions,
-    dynamics_consistency,
-)
 from tatl_mj.transfer.coordinates import Coordinates, InCoordinates
 from tatl_mj.transfer.features import wrap_angle
+from tatl_mj.transfer.intertask_mapping import AffineMapping, Mapping
+from tatl_mj.transfer.manifold_alignment import align_manifolds
+from tatl_mj.transfer.transition_alignment import TransitionAlignment, align_transitions, dynamics_consistency
 from tatl_mj.transitions import Transitions
 
 ACTIONS = np.array([[-1.0], [0.0], [1.0]])

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping, Mapping, TransitionAlignment
 from tatl_mj.transfer.coordinates import Coordinates, InCoordinates, align_in_coordinates
+from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping, Mapping
+from tatl_mj.transfer.transition_alignment import TransitionAlignment
 from tatl_mj.transitions import Transitions
 
 PI = np.pi

@@ -7,9 +7,10 @@ from test_transfer_tabular import GAMMA, one_visit_per_pair
 
 from tatl_mj import suite
 from tatl_mj.transfer import registry
-from tatl_mj.transfer.alignment import IdentityMapping
+from tatl_mj.transfer.intertask_mapping import IdentityMapping
 from tatl_mj.transfer.method import TransferProblem
-from tatl_mj.transfer.methods.horizon import HorizonTATL, HorizonTATLPolicy
+from tatl_mj.transfer.methods.horizon import HorizonTATL
+from tatl_mj.transfer.methods.horizon_policy import HorizonTATLPolicy
 from tatl_mj.transfer.methods.projected import ProjectedSource
 from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanPolicy, ReplanTATL
 from tatl_mj.transfer.methods.tatl import TATL

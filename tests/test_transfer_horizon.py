@@ -1,6 +1,6 @@
-"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.methods.horizon).
+"""Known answers for horizon-matched TA-TL (tatl_mj.transfer.methods.horizon, horizon_policy, linearisation).
 
-1. With H = 1, rho = 1 and W = I it is Algorithm 1 (tatl.TATLPolicy) up to rounding, on
+1. With H = 1, rho = 1 and W = I it is Algorithm 1 (algorithm1.TATLPolicy) up to rounding, on
    the fixture of test_transfer_tatl (double integrator seen through an affine map) and on
    an apprentice with a periodic coordinate near the wrap.
 2. A double integrator whose action moves only the velocity, asked to follow a source
@@ -16,11 +16,11 @@ import pytest
 from test_transfer_tatl import CHI, SOURCE_ACTIONS, OneStepLQRQ, source_step
 from test_transfer_tatl import target_step as tatl_target_step
 
-from tatl_mj.transfer.alignment import AffineMapping
+from tatl_mj.transfer.algorithm1 import TATLPolicy
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice
 from tatl_mj.transfer.features import LinearFeatures, wrap_angle
-from tatl_mj.transfer.methods.horizon import HorizonTATLPolicy
-from tatl_mj.transfer.tatl import TATLPolicy
+from tatl_mj.transfer.intertask_mapping import AffineMapping
+from tatl_mj.transfer.methods.horizon_policy import HorizonTATLPolicy
 
 # --- The fixture of test_transfer_tatl ------------------------------------------------
 
@@ -287,7 +287,7 @@ def test_rejects_mismatched_states():
 
 
 def test_linearised_recovers_a_linear_model_and_cancels_fixed_seed_noise():
-    from tatl_mj.transfer.methods.horizon import linearised
+    from tatl_mj.transfer.methods.linearisation import linearised
 
     A = np.array([[1.0, 0.1], [-0.2, 0.95]])
     B = np.array([[0.0], [0.3]])
@@ -372,8 +372,10 @@ def test_apprentice_affine_parts_predict_exactly():
 def test_shared_decisions_decide_as_each_policy_alone(reference, affine):
     """Policies differing only in their apprentice decide together (one source rollout,
     one correction): each gets, bit for bit, the actions it computes alone; policies with
-    another horizon are not grouped."""
-    from tatl_mj.transfer.methods.horizon import shared_decisions
+    another horizon are not grouped. The evaluation reaches it through the method
+    contract's hook (``method.joint_decisions``), which gives the same decisions."""
+    from tatl_mj.transfer.method import joint_decisions
+    from tatl_mj.transfer.methods.horizon_policy import shared_decisions
 
     common = dict(source_q=OneStepLQRQ(), mapping=CHI, source_step=source_step, target_actions=2.0 * SOURCE_ACTIONS)
     if reference == "zero":
@@ -403,6 +405,13 @@ def test_shared_decisions_decide_as_each_policy_alone(reference, affine):
         np.testing.assert_array_equal(actions, policies[b](s))
         clipped += int(np.sum(np.abs(actions) == 1.0))
     assert clipped > 0  # the limits are in play
+    through_the_contract = joint_decisions(policies)
+    assert through_the_contract is not None
+    for mine, theirs in zip(got, through_the_contract([0, 2, 1], states)):
+        np.testing.assert_array_equal(mine, theirs)
     other = dataclasses.replace(policies[0], horizon=5)
     assert shared_decisions([policies[0], other]) is None
     assert shared_decisions(policies[:1]) is None
+    assert joint_decisions([policies[0], other]) is None
+    assert joint_decisions([lambda s: s, policies[0]]) is None  # the first policy has no hook
+    assert joint_decisions([]) is None

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from tatl_mj.description import TaskDescription
-from tatl_mj.transfer.alignment import IdentityMapping
+from tatl_mj.transfer.algorithm1 import TATLPolicy
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
+from tatl_mj.transfer.intertask_mapping import IdentityMapping
 from tatl_mj.transfer.method import TransferMethod, TransferProblem
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, MappedQ
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.registry import METHODS, build
-from tatl_mj.transfer.tatl import TATLPolicy
 from tatl_mj.transitions import Transitions
 
 ACTIONS = np.array([[-1.0], [0.0], [1.0]])

@@ -14,7 +14,7 @@ from tatl_mj import sampling, suite
 from tatl_mj.description import CellMap
 from tatl_mj.suite import gridworld
 from tatl_mj.transfer import tabular
-from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping
+from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping
 from tatl_mj.transfer.methods.replan import OneStepRule, replan
 from tatl_mj.transfer.tabular_q import q_iteration
 from tatl_mj.transitions import Transitions

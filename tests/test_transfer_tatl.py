@@ -1,4 +1,4 @@
-"""Known answers for the TA-TL policy (Algorithm 1, tatl_mj.transfer.tatl).
+"""Known answers for the TA-TL policy (Algorithm 1, tatl_mj.transfer.algorithm1).
 
 Source: a double integrator x' = A x + b a_S with a greedy one-step LQR-cost Q.
 Target: the same mechanism seen through an exact affine state map s_T = M x + o, with
@@ -9,11 +9,11 @@ x' = A x + b (g a_T + kappa . x + c). Its apprentice is fitted from noisy random
 import numpy as np
 import pytest
 
-from tatl_mj.transfer.alignment import AffineMapping, IdentityMapping
+from tatl_mj.transfer.algorithm1 import DiscreteTATLPolicy, TATLPolicy
 from tatl_mj.transfer.apprentice import fit_apprentice
 from tatl_mj.transfer.features import LinearFeatures, OneHot, wrap_angle
+from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping
 from tatl_mj.transfer.tabular_q import q_iteration
-from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
 
 DT = 0.1
 A = np.array([[1.0, DT], [0.0, 1.0]])

@@ -13,11 +13,11 @@ from typing import Any
 # Name -> the submodule that defines it. Imported on first use (PEP 562), so importing one
 # submodule (the roles a spec reads) does not load every method and scikit-learn with it.
 _EXPORTS = {
-    "AffineMapping": "alignment",
-    "IdentityMapping": "alignment",
-    "LinearAlignment": "alignment",
-    "Mapping": "alignment",
-    "align_manifolds": "alignment",
+    "AffineMapping": "intertask_mapping",
+    "IdentityMapping": "intertask_mapping",
+    "LinearAlignment": "manifold_alignment",
+    "Mapping": "intertask_mapping",
+    "align_manifolds": "manifold_alignment",
     "Apprentice": "apprentice",
     "fit_apprentice": "apprentice",
     "learn_apprentice": "apprentice",
@@ -43,9 +43,9 @@ _EXPORTS = {
     "METHODS": "registry",
     "TabularQ": "tabular_q",
     "q_iteration": "tabular_q",
-    "DiscreteTATLPolicy": "tatl",
-    "TATLPolicy": "tatl",
-    "TATLStep": "tatl",
+    "DiscreteTATLPolicy": "algorithm1",
+    "TATLPolicy": "algorithm1",
+    "TATLStep": "algorithm1",
 }
 
 

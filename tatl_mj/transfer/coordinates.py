@@ -21,8 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.transfer.alignment import Mapping, SourceStep, TransitionAlignment, align_transitions
 from tatl_mj.transfer.features import as_states, wrap_angle
+from tatl_mj.transfer.intertask_mapping import Mapping
+from tatl_mj.transfer.transition_alignment import SourceStep, TransitionAlignment, align_transitions
 from tatl_mj.transitions import Transitions
 
 
@@ -147,7 +148,7 @@ def align_in_coordinates(
     settings: TransitionAlignment = TransitionAlignment(),
     rng: np.random.Generator | None = None,
 ) -> tuple[InCoordinates, dict[str, Any]]:
-    """:func:`~tatl_mj.transfer.alignment.align_transitions` in each domain's mapping coordinates.
+    """:func:`~tatl_mj.transfer.transition_alignment.align_transitions` in each domain's mapping coordinates.
 
     The transitions (and ``source_step``, if given) are converted to mapping
     coordinates, the affine map is learned there, and the result is wrapped in

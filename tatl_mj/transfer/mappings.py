@@ -14,7 +14,10 @@ from typing import Any, Callable
 import numpy as np
 
 from tatl_mj.description import TaskDescription
-from tatl_mj.transfer import alignment, coordinates
+from tatl_mj.transfer import coordinates
+from tatl_mj.transfer.intertask_mapping import AffineMapping, IdentityMapping
+from tatl_mj.transfer.manifold_alignment import align_manifolds
+from tatl_mj.transfer.transition_alignment import TransitionAlignment
 from tatl_mj.transitions import Transitions
 
 Built = tuple[Any, "dict | None", int, int]
@@ -53,7 +56,7 @@ class MappingInputs:
 
 def identity(inputs: MappingInputs) -> Built:
     """chi = chi_plus = the identity (equal state spaces)."""
-    return alignment.IdentityMapping(), None, 0, 0
+    return IdentityMapping(), None, 0, 0
 
 
 def affine(inputs: MappingInputs) -> Built:
@@ -63,19 +66,17 @@ def affine(inputs: MappingInputs) -> Built:
     matrix = np.asarray(settings.matrix, dtype=np.float64)  # its shape is checked at spec load
     offset = np.asarray(settings.offset or np.zeros(len(matrix)), dtype=np.float64)
     record = {"kind": "affine", "matrix": matrix.tolist(), "offset": offset.tolist()}
-    inner = alignment.AffineMapping(matrix, offset)
+    inner = AffineMapping(matrix, offset)
     return coordinates.InCoordinates(inner, source_coords, target_coords), record, 0, 0
 
 
-def transition_settings(table: dict) -> alignment.TransitionAlignment:
+def transition_settings(table: dict) -> TransitionAlignment:
     """A spec's ``mapping.transition`` table as settings (TOML arrays as tuples)."""
-    return alignment.TransitionAlignment.from_dict(
-        {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
-    )
+    return TransitionAlignment.from_dict({k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})
 
 
 def transition_alignment(inputs: MappingInputs) -> Built:
-    """The map whose candidates best explain the target's transitions (``alignment.TransitionAlignment``)."""
+    """The map whose candidates best explain the target's transitions (``TransitionAlignment``)."""
     source_coords, target_coords = inputs.coordinates()
     source, target = inputs.source_samples(inputs.n), inputs.target_stream.head(inputs.n)
     rng = inputs.rng()
@@ -97,7 +98,7 @@ def manifold_alignment(inputs: MappingInputs) -> Built:
     source_coords, target_coords = inputs.coordinates()
     source, target = inputs.source_samples(inputs.n), inputs.target_stream.head(inputs.n)
     rng = inputs.rng()
-    inner = alignment.align_manifolds(
+    inner = align_manifolds(
         source_coords.to_mapping(source.states),
         target_coords.to_mapping(target.states),
         n_neighbors=inputs.settings.n_neighbors,

@@ -26,9 +26,9 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.policy import StatePolicy
-from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.algorithm1 import SourceStep
 from tatl_mj.transfer.fqi import QFunction
-from tatl_mj.transfer.tatl import SourceStep
+from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transitions import Transitions
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -202,7 +202,12 @@ class TransferMethod(Protocol):
       random streams and differ only in their mapping get the same record, and
       ``tatl run`` computes it once (default True);
     - on the returned policy, ``samples_used``: how many of the n shared samples
-      it kept (Algorithm 2 may stop early; default n).
+      it kept (Algorithm 2 may stop early; default n);
+    - on the returned policy, ``decide_together(policies)``: called on the first of
+      several policies evaluated side by side (a learning curve's budgets), a
+      :data:`JointDecisions` that gives each block's states exactly the actions its
+      policy gives them alone, sharing work between them, or None where they cannot
+      (:func:`joint_decisions` reads it; default: each policy is called on its own).
 
     A method class declares what each of its settings admits in a class-level table,
     ``constraints`` (``tatl_mj.validation``; the built-ins' in their modules): a spec's
@@ -263,6 +268,18 @@ class Withheld:
         self._refuse()
 
 
+JointDecisions = Callable[[list[int], list[np.ndarray]], list[np.ndarray]]
+"""Several policies deciding at once: ``decide(blocks, states)`` -> for each block b and its
+(N_b, dT) states, ``policies[b](states)``."""
+
+
+def joint_decisions(policies: Sequence[Any]) -> JointDecisions | None:
+    """The first policy's ``decide_together(policies)`` where it has that hook (see
+    :class:`TransferMethod`), else None: the policies are then called one by one."""
+    hook = getattr(policies[0], "decide_together", None) if policies else None
+    return None if hook is None else hook(policies)
+
+
 def samples_used(policy: Any, budget: int) -> int:
     """How many of the ``budget`` shared samples ``policy`` kept (its ``samples_used``, else all)."""
     reported = getattr(policy, "samples_used", None)
@@ -271,6 +288,7 @@ def samples_used(policy: Any, budget: int) -> int:
 
 __all__ = [
     "Contract",
+    "JointDecisions",
     "Model",
     "Policy",
     "SourceWithheld",
@@ -278,5 +296,6 @@ __all__ = [
     "TransferProblem",
     "Withheld",
     "contract",
+    "joint_decisions",
     "samples_used",
 ]

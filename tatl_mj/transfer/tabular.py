@@ -58,7 +58,7 @@ import dataclasses
 import numpy as np
 
 from tatl_mj.description import CellMap
-from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transfer.tabular_q import TabularQ, q_iteration
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import integer

@@ -4,7 +4,7 @@ It reuses a finished ``tatl run`` folder when given one (the source policy,
 mapping and target data of that seed), and otherwise trains what it needs at
 the chosen preset. The policy is the one the method learns from the preset's
 largest target-sample budget, built by the same call as in evaluation
-(``pipeline.learned_policy``), so the clip shows the evaluated policy.
+(``method_unit.learned_policy``), so the clip shows the evaluated policy.
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import numpy as np
 
 from tatl_mj import render, suite
 from tatl_mj.experiments.results.records import RunDirectory, load_blob
-from tatl_mj.experiments.run import pipeline
+from tatl_mj.experiments.run import determinism, method_unit, sides, source_unit
 from tatl_mj.experiments.spec import ExperimentSpec, load_spec, methods_from_spec
 
 RANDOM = "random"  # the uniformly random reference policy
 
 
-def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceArtifacts:
+def _artifacts(spec, preset, seed: int, run_dir: str | None) -> source_unit.SourceArtifacts:
     if run_dir is not None:
         folder = RunDirectory(run_dir)
         blob = folder.blob_path(spec.name, seed)
@@ -31,18 +31,18 @@ def _artifacts(spec, preset, seed: int, run_dir: str | None) -> pipeline.SourceA
         if folder.is_done(spec.name, seed, "source"):
             return load_blob(folder.read_blob(spec.name, seed))
         print(f"note: no valid {blob}; training seed {seed} at preset {preset} instead")
-    return pipeline.learn_source(spec, spec.preset(preset), seed)
+    return source_unit.learn_source(spec, spec.preset(preset), seed)
 
 
 def clip_policy(spec: ExperimentSpec, preset: str, seed: int, method: str, artifacts: Any) -> Any:
     """The policy a clip shows: the spec's ``method`` at the preset's largest budget, as evaluated."""
     if method == RANDOM:
-        return pipeline.random_policy(spec.target, pipeline.derive_seed(seed, "random-policy"))
+        return sides.random_policy(spec.target, determinism.derive_seed(seed, "random-policy"))
     chosen = spec.preset(preset)
     transfer = methods_from_spec(spec, chosen, [method])[method]
     with warnings.catch_warnings(record=True) as caught:  # e.g. Algorithm 2's rule not met: one line each
         warnings.simplefilter("always")
-        policy = pipeline.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
+        policy = method_unit.learned_policy(spec, chosen, seed, transfer, artifacts, max(chosen.target_budgets))
     for message in sorted({str(w.message) for w in caught}):
         meaning = (
             " (the apprentice then uses every sample: expected where the model never matches the target closely)"
@@ -74,7 +74,7 @@ def render_from_spec(
     spec.preset(preset)  # an unknown preset fails here, naming the valid ones
     if method != RANDOM and method not in spec.methods:
         raise ValueError(f"unknown method {method!r} for {spec.name}; valid methods: {[*spec.methods, RANDOM]}")
-    with pipeline.one_thread():  # as a unit runs: the clip shows the evaluated policy
+    with determinism.one_thread():  # as a unit runs: the clip shows the evaluated policy
         return _render(spec, method, seed, out, seconds, width, height, fps, preset, run_dir, with_source)
 
 
@@ -95,7 +95,7 @@ def _render(
     needs_artifacts = method != RANDOM or with_source
     artifacts = _artifacts(spec, preset, seed, run_dir) if needs_artifacts else None
     policy = clip_policy(spec, preset, seed, method, artifacts)
-    kwargs = {**target.task_kwargs, "random": pipeline.derive_seed(seed, spec.stream_name, "clip")}
+    kwargs = {**target.task_kwargs, "random": determinism.derive_seed(seed, spec.stream_name, "clip")}
     env = suite.load(target.domain, target.task, task_kwargs=kwargs)
     source = None
     if with_source:

@@ -55,8 +55,19 @@ MOVED_MODULES = {
     "tatl_mj.experiments.mappings": "tatl_mj.transfer.mappings",
 }
 """Modules whose classes a source cache (``source.pkl``) written before a move names: old path -> new."""
-MOVED_NAMES: dict[tuple[str, str], str] = {}
-"""Single classes or functions that left a module split in parts: (old module, name) -> new module."""
+MOVED_NAMES: dict[tuple[str, str], str] = {
+    ("tatl_mj.experiments.run.pipeline", "SourceArtifacts"): "tatl_mj.experiments.run.source_unit",
+    ("tatl_mj.experiments.run.pipeline", "QueriedMapping"): "tatl_mj.experiments.run.problems",
+    ("tatl_mj.experiments.run.pipeline", "_source_region"): "tatl_mj.experiments.run.problems",  # QueriedMapping's
+    ("tatl_mj.transfer.alignment", "Mapping"): "tatl_mj.transfer.intertask_mapping",
+    ("tatl_mj.transfer.alignment", "IdentityMapping"): "tatl_mj.transfer.intertask_mapping",
+    ("tatl_mj.transfer.alignment", "AffineMapping"): "tatl_mj.transfer.intertask_mapping",
+    ("tatl_mj.transfer.alignment", "LinearAlignment"): "tatl_mj.transfer.manifold_alignment",
+    ("tatl_mj.transfer.alignment", "TransitionAlignment"): "tatl_mj.transfer.transition_alignment",
+    ("tatl_mj.transfer.alignment", "_IncrementModel"): "tatl_mj.transfer.transition_alignment",
+}
+"""Single classes or functions that left a module split in parts: (old module, name) -> new module
+(the old module as ``MOVED_MODULES`` leaves it: it is applied first)."""
 
 
 class _MovedUnpickler(pickle.Unpickler):

@@ -12,7 +12,7 @@ other unit has finished and the summary is written, :func:`run` raises
 :class:`RunFailed`, so a run with a failed unit never looks like a success.
 
 Every unit computes on one BLAS/OpenMP thread and one MuJoCo thread
-(:func:`pipeline.one_thread`), as a one-CPU Ray task does, so its record depends
+(:func:`determinism.one_thread`), as a one-CPU Ray task does, so its record depends
 neither on the executor nor on the machine's core count.
 """
 
@@ -46,9 +46,16 @@ from tatl_mj.experiments.results.records import (
     write_atomic,
     write_json,
 )
-from tatl_mj.experiments.run import executors, lock, pipeline
+from tatl_mj.experiments.run import determinism, executors, lock, method_unit, sides, source_unit
 from tatl_mj.experiments.run.kernels import kernels
-from tatl_mj.experiments.spec import NOT_CONTENT, ExperimentSpec, conditions, dynamics_versions, spec_to_dict
+from tatl_mj.experiments.spec import (
+    NOT_CONTENT,
+    ExperimentSpec,
+    conditions,
+    dynamics_versions,
+    methods_from_spec,
+    spec_to_dict,
+)
 from tatl_mj.transfer import fit_time, registry
 from tatl_mj.transfer.method import contract
 
@@ -106,7 +113,7 @@ def work(
     """
     start = time.perf_counter()
     try:
-        with pipeline.one_thread():  # workers run in parallel; records must not see the core count
+        with determinism.one_thread():  # workers run in parallel; records must not see the core count
             return _work(spec, preset_name, unit, source_blob, transfer, start)
     except Exception:  # noqa: BLE001 - a unit's failure must not stop the batch
         return {"error": traceback.format_exc()}
@@ -121,7 +128,7 @@ def _work(
     if unit.name == SOURCE_UNIT:
         # source_blob here: the artefacts of an experiment that differs only in its mapping.
         shared = load_blob(source_blob) if source_blob is not None else None
-        artifacts = pipeline.learn_source(spec, preset, unit.seed, shared)
+        artifacts = source_unit.learn_source(spec, preset, unit.seed, shared)
         blob = pickle.dumps(artifacts, protocol=pickle.HIGHEST_PROTOCOL)
         record = {
             "experiment": spec.name,
@@ -136,7 +143,7 @@ def _work(
     else:
         artifacts = load_blob(source_blob)
         blob = None
-        record = pipeline.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
+        record = method_unit.run_method(spec, preset, unit.seed, unit.name, artifacts, transfer=transfer)
     record["kernels"] = kernels()  # what it depends on besides its settings and seed
     record["dynamics"] = dynamics_versions(spec)  # and the versions of its tasks' dynamics
     record["wall_s"] = time.perf_counter() - start
@@ -242,7 +249,7 @@ def _share_key(spec: ExperimentSpec, preset: str, unit: Unit, custom: dict[str, 
         return json.dumps([*base, unit.seed], sort_keys=True, default=repr)
     if unit.name in custom:
         return None
-    transfer = pipeline.methods_from_spec(spec, spec.preset(preset), [unit.name])[unit.name]
+    transfer = methods_from_spec(spec, spec.preset(preset), [unit.name])[unit.name]
     if contract(transfer).uses_source:
         return None
     parts = [*base, unit.seed, unit.name, spec.methods.get(unit.name), repr(transfer)]
@@ -287,7 +294,7 @@ def _check_applies(spec: ExperimentSpec, name: str) -> None:
     if check is None:
         return
     try:
-        check(pipeline.description_of(spec.source), pipeline.description_of(spec.target))
+        check(sides.description_of(spec.source), sides.description_of(spec.target))
     except ValueError as error:
         raise MethodError(f"method {name!r} cannot run on {spec.name}: {error}") from None
 

@@ -17,9 +17,10 @@ from typing import ClassVar
 import numpy as np
 
 from tatl_mj.description import CellMap, TaskDescription
-from tatl_mj.transfer.alignment import Mapping
+from tatl_mj.transfer.algorithm1 import SourceStep
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction
+from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transfer.method import TransferProblem
 from tatl_mj.transfer.tabular import (
     PRIOR_SCOPES,
@@ -30,7 +31,6 @@ from tatl_mj.transfer.tabular import (
     uninformed_model,
 )
 from tatl_mj.transfer.tabular_q import TabularQ
-from tatl_mj.transfer.tatl import SourceStep
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import Boolean, Constraints, Interval, Options, check_settings
 

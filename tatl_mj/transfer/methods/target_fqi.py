@@ -19,9 +19,9 @@ from typing import ClassVar
 import numpy as np
 
 from tatl_mj.description import TaskDescription
-from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.features import FeaturesSpec, check_features
 from tatl_mj.transfer.fqi import PRECISIONS, REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
+from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
 from tatl_mj.transitions import Transitions

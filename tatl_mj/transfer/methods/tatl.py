@@ -2,7 +2,7 @@
 
 :class:`TATL` fits the target apprentice ``s' = W phi(s) + B a`` by Algorithm 2
 (``tatl_mj.transfer.apprentice``) and returns Algorithm 1's policy
-(``tatl_mj.transfer.tatl``) built on it.
+(``tatl_mj.transfer.algorithm1``) built on it.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from typing import ClassVar
 import numpy as np
 
 from tatl_mj.description import TaskDescription
+from tatl_mj.transfer.algorithm1 import DiscreteTATLPolicy, TATLPolicy
 from tatl_mj.transfer.apprentice import Apprentice, fit_apprentice, learn_apprentice
 from tatl_mj.transfer.features import Features, FeaturesSpec, check_features, make_features
 from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
-from tatl_mj.transfer.tatl import DiscreteTATLPolicy, TATLPolicy
 from tatl_mj.transitions import Transitions
 from tatl_mj.validation import Constraints, Interval, InvalidSetting, ListOf, Options, check_settings
 

@@ -36,10 +36,10 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-from tatl_mj.transfer.alignment import Mapping
 from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction
+from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.validation import Array, Constraints, Function, check_settings
 
 SourceStep = Callable[[np.ndarray, np.ndarray], np.ndarray]
