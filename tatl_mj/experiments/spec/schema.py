@@ -75,7 +75,7 @@ class MappingSpec:
     ``transition_alignment`` (this project's own: candidate state maps chosen
     by how well they explain the target's (s, a, s') transitions, dynamics
     consistency, in the spirit of Ammar et al.'s triplets but not their method;
-    settings in ``transition``, see ``alignment.TransitionAlignment``); or ``affine``: a hand-coded
+    settings in ``transition``, see ``transition_alignment.TransitionAlignment``); or ``affine``: a hand-coded
     chi(s_S) = matrix s_S + offset, ``matrix`` as rows (dT rows of dS numbers),
     optional ``offset`` (dT).
 
