@@ -8,15 +8,14 @@ the highest IQM of the question's per-seed statistic; ties to the one listed fir
 
 from __future__ import annotations
 
-import json
 import sys
 
-from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results import summary_data, verdicts
 from tatl_mj.transfer import roles
 
 if __name__ == "__main__":
-    summary = json.load(open(sys.argv[1], encoding="utf-8"))
-    for name, experiment in summary["experiments"].items():
-        chosen = verdicts.choose_best_baseline(experiment, roles.BASELINES)
+    summary = summary_data.read(sys.argv[1])
+    for name, experiment in summary.experiments.items():
+        chosen = verdicts.choose_best_baseline(experiment.methods, roles.BASELINES)
         table = ", ".join(f'{q} = "{b}"' for q, b in chosen.items())
         print(f"{name}: best_baseline = {{ {table} }}")

@@ -18,12 +18,13 @@ from pathlib import Path
 
 from tatl_mj.experiments.report import credit_maps, figures, tables
 from tatl_mj.experiments.results import reference
+from tatl_mj.experiments.results.summary_data import Summary
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER, SWEEPS = "paper-heldout", "sweeps-heldout"
 
 
-def blocks(paper: dict, sweeps: dict) -> dict[tuple[str, str], str]:
+def blocks(paper: Summary, sweeps: Summary) -> dict[tuple[str, str], str]:
     """(file, block name) -> the block's text."""
     credit = "\n".join(tables.credit_table(name, cells) for name, cells in credit_maps.sweeps(sweeps).items())
     return {
@@ -43,14 +44,14 @@ def replace_block(text: str, name: str, body: str, where: str) -> str:
     return pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
 
 
-def draw(summary: dict, out: Path) -> None:
+def draw(summary: Summary, out: Path) -> None:
     """The figures of an unpacked set into ``out`` (docs/figures)."""
-    for name, experiment in summary["experiments"].items():
-        if experiment.get("spec", {}).get("condition"):
+    for name, experiment in summary.experiments.items():
+        if experiment.spec.get("condition"):
             continue
         figures.figure(name, experiment, out / f"{name}.png")
     maps = credit_maps.sweeps(summary)
-    if summary.get("aggregate") and not maps:
+    if summary.aggregate and not maps:
         figures.profile(summary, out / "performance_profile.png")
     for name, cells in maps.items():
         credit_maps.credit_map(name, cells, out / f"credit_{name}.png")
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         summaries = {}
         for name in (PAPER, SWEEPS):
-            summaries[name] = reference.unpack(reference.load(name), Path(tmp) / name)
+            summaries[name] = Summary.from_json(reference.unpack(reference.load(name), Path(tmp) / name))
             if not args.check:
                 draw(summaries[name], ROOT / "docs" / "figures")
     stale = []

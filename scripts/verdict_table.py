@@ -8,11 +8,11 @@ With PREFIX (e.g. ``ta-tl``) only the methods whose names start with it.
 
 from __future__ import annotations
 
-import json
 import sys
 
 from tatl_mj.experiments.report.tables import verdict_table
+from tatl_mj.experiments.results import summary_data
 
 if __name__ == "__main__":
     prefix = sys.argv[2] if len(sys.argv) > 2 else ""
-    print(verdict_table(json.load(open(sys.argv[1], encoding="utf-8")), prefix))
+    print(verdict_table(summary_data.read(sys.argv[1]), prefix))

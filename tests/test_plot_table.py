@@ -7,6 +7,8 @@ import pytest
 from PIL import Image
 
 from tatl_mj.experiments.report import figures, style, tables
+from tatl_mj.experiments.results import records
+from tatl_mj.experiments.results.summary_data import Experiment, Summary
 
 BUDGETS = [100, 1000, 10000]
 
@@ -49,6 +51,16 @@ def summary(reach: dict, seeds: dict | None = None, methods: list | None = None)
     }
 
 
+def typed(data: dict) -> Summary:
+    """A hand-made summary (no schema version: an older one) as the readers get it, upgraded."""
+    return Summary.from_json(records.upgrade(data))
+
+
+def typed_experiment(exp: dict) -> Experiment:
+    summary = {"preset": "p", "seeds": [0, 1, 2], "methods": list(exp["methods"]), "experiments": {"toy": exp}}
+    return typed(summary).experiments["toy"]
+
+
 def row(table: str, label: str) -> list[str]:
     line = next(line for line in table.splitlines() if line.startswith(f"| {label} |"))
     return [cell.strip() for cell in line.strip("|").split("|")]
@@ -56,7 +68,7 @@ def row(table: str, label: str) -> list[str]:
 
 def test_transitions_to_threshold_on_both_accountings():
     result = summary({"ta-tl": [100, 100, None], "uma-tl": [1000, 1000, 100], "rl": [None, None, 1000]})
-    table = tables.table(result)
+    table = tables.table(typed(result))
     assert row(table, "TA-TL (paper, Alg. 1)")[3:] == ["100 (2/3 reached, 2 at the smallest budget)", "100"]
     assert row(table, "UMA-TL")[3:] == ["1,000 (3/3 reached, 1 at the smallest budget)", "1,000"]
     assert row(table, "RL (no transfer)")[3:] == ["never (1/3 reached)", "never"]
@@ -66,13 +78,15 @@ def test_transitions_to_threshold_on_both_accountings():
     curve = result["experiments"]["toy"]["methods"]["ta-tl"]["curve"]
     curve["target_transitions"] = [[b + 2000 for b in BUDGETS]] * 3
     curve["rollout_transitions"] = [[2000] * 3] * 3
-    assert row(tables.table(result), "TA-TL (paper, Alg. 1)")[3:5] == ["2,100 (2/3 reached)", "100"]
+    assert row(tables.table(typed(result)), "TA-TL (paper, Alg. 1)")[3:5] == ["2,100 (2/3 reached)", "100"]
 
 
 def test_table_compares_only_shared_seeds_and_says_so():
     # TA-TL finished seed 0 only; UMA-TL finished 0 and 1 and reached it only on seed 1.
     table = tables.table(
-        summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []}, seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []})
+        typed(
+            summary({"ta-tl": [100], "uma-tl": [None, 100], "rl": []}, seeds={"ta-tl": [0], "uma-tl": [0, 1], "rl": []})
+        )
     )
     assert row(table, "UMA-TL")[3] == "never (0/1 reached)"
     assert row(table, "TA-TL (paper, Alg. 1)")[3] == "100 (1/1 reached, 1 at the smallest budget)"
@@ -85,7 +99,9 @@ def test_table_compares_only_shared_seeds_and_says_so():
 def test_table_without_meaningful_threshold_judges_final_returns():
     exp = experiment({"ta-tl": [None], "uma-tl": [None]})
     exp["random_returns"] = [50.0]  # every method ends at 5, below random
-    table = tables.table({"preset": "p", "seeds": [0], "methods": ["ta-tl", "uma-tl"], "experiments": {"toy": exp}})
+    table = tables.table(
+        typed({"preset": "p", "seeds": [0], "methods": ["ta-tl", "uma-tl"], "experiments": {"toy": exp}})
+    )
     assert "No meaningful threshold" in table and "Judged on final returns" in table
     assert row(table, "TA-TL (paper, Alg. 1)")[3:] == ["no meaningful threshold", "n/a"]
 
@@ -121,7 +137,7 @@ def test_figure_is_drawn_for_any_number_of_methods(tmp_path, case):
     else:
         exp = experiment({"ta-tl": [None], "uma-tl": [None]})
         exp["random_returns"] = [50.0]
-    path = figures.figure("toy", exp, tmp_path / "toy.png")
+    path = figures.figure("toy", typed_experiment(exp), tmp_path / "toy.png")
     image = np.asarray(Image.open(path).convert("RGB"))
     assert image.shape[1] == 1320 and image.shape[0] > 500
     # Every method's colour appears in the figure.
@@ -134,7 +150,7 @@ def test_figure_is_drawn_for_any_number_of_methods(tmp_path, case):
 def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
     result = summary({"ta-tl-replan": [100, 100, 1000], "replan-no-source": [10000, 10000, 10000]})
     result["experiments"]["toy"]["spec"]["methods"] = {"ta-tl-replan": {}, "replan-no-source": {}}
-    table = tables.table(result)
+    table = tables.table(typed(result))
     assert "Transfer against its ablation without the source:" in table
     assert (
         "- `ta-tl-replan` vs `replan-no-source`: mean final return 10 vs 10 (higher on 0, lower on 0 of 3 seeds); "
@@ -142,7 +158,7 @@ def test_table_says_whether_transfer_beats_its_ablation_without_the_source():
         "`ta-tl-replan` **beats** its source-free ablation"
     ) in table
     del result["experiments"]["toy"]["spec"]["methods"]
-    assert "ablation without the source" not in tables.table(result)
+    assert "ablation without the source" not in tables.table(typed(result))
 
 
 @pytest.mark.parametrize("meaningful", [True, False], ids=["threshold", "no-threshold"])
@@ -150,7 +166,7 @@ def test_axes_say_what_a_return_is_and_titles_agree_with_them(tmp_path, drawn, m
     exp = experiment({"ta-tl": [100, 1000], "rl": [None, 10000]} if meaningful else {"ta-tl": [None], "rl": [None]})
     if not meaningful:
         exp["random_returns"] = [50.0]
-    figures.figure("toy", exp, tmp_path / "toy.png")
+    figures.figure("toy", typed_experiment(exp), tmp_path / "toy.png")
     (fig,) = drawn
     curve, length = fig.axes
     assert curve.get_ylabel() == "return (undiscounted episode sum)"
@@ -195,7 +211,7 @@ def interval_experiment() -> dict:
 def test_interval_figure_draws_both_accountings_and_the_paired_verdicts(tmp_path, drawn):
     import matplotlib.collections
 
-    figures.figure("toy", interval_experiment(), tmp_path / "toy.png")
+    figures.figure("toy", typed_experiment(interval_experiment()), tmp_path / "toy.png")
     (fig,) = drawn
     counted, paper, pairs = fig.axes
     assert counted.get_ylabel() == paper.get_ylabel() == figures.NORMALISED_LABEL
@@ -219,18 +235,18 @@ def test_interval_figure_draws_both_accountings_and_the_paired_verdicts(tmp_path
 
 def test_the_preamble_names_the_kernels_that_computed_the_records():
     reach = {"ta-tl": [100, 100, 100], "rl": [1000, 1000, 1000]}
-    preamble = tables.table(summary(reach)).split("\n\n")[0]
+    preamble = tables.table(typed(summary(reach))).split("\n\n")[0]
     assert "Arithmetic kernels" not in preamble  # a summary written before the field
 
     one = summary(reach) | {"kernels": {"openblas 0.3.31 SkylakeX; numpy X86_V4": 1030}}
-    preamble = tables.table(one).split("\n\n")[0]
+    preamble = tables.table(typed(one)).split("\n\n")[0]
     assert preamble.endswith(
         "Arithmetic kernels: `openblas 0.3.31 SkylakeX; numpy X86_V4` (1,030 records). Per-seed returns "
         'depend on them, verdicts should not (docs/protocol.md, "Across machines").'
     )
 
     mixed = summary(reach) | {"kernels": {"openblas 0.3.31 SkylakeX": 4, "openblas 0.3.31 Haswell": 12, "unknown": 3}}
-    preamble = tables.table(mixed).split("\n\n")[0]
+    preamble = tables.table(typed(mixed)).split("\n\n")[0]
     assert (
         "Arithmetic kernels: `openblas 0.3.31 Haswell` (12 records), `openblas 0.3.31 SkylakeX` (4 records); "
         "3 older records do not name theirs." in preamble

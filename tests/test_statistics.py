@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tatl_mj.experiments.results import statistics as st
+from tatl_mj.experiments.results import verdicts
 
 
 def test_iqm_is_the_mean_of_the_middle_half():
@@ -13,10 +14,10 @@ def test_iqm_is_the_mean_of_the_middle_half():
 
 
 def test_normalised_scores_put_random_at_0_and_the_reference_at_1():
-    np.testing.assert_allclose(st.normalised([-10.0, 0.0, 5.0], -10.0, 0.0), [0.0, 1.0, 1.5])
-    np.testing.assert_allclose(st.normalised([1.0, 1.0], np.array([0.0, 0.5]), 2.0), [0.5, 1 / 3])
+    np.testing.assert_allclose(verdicts.normalised([-10.0, 0.0, 5.0], -10.0, 0.0), [0.0, 1.0, 1.5])
+    np.testing.assert_allclose(verdicts.normalised([1.0, 1.0], np.array([0.0, 0.5]), 2.0), [0.5, 1 / 3])
     with pytest.raises(ValueError, match="must lie above the random"):
-        st.normalised([1.0], 3.0, 2.0)
+        verdicts.normalised([1.0], 3.0, 2.0)
 
 
 def _manual_iqm_interval(strata, reps, rng):
@@ -48,19 +49,19 @@ def test_a_method_identical_to_its_ablation_is_not_credited():
     scores = np.random.default_rng(0).normal(size=10)
     estimate = st.improvement_interval([(scores, scores.copy())])
     assert estimate.value == pytest.approx(0.5) and estimate.low < 0.5 < estimate.high
-    assert st.verdict(estimate) == st.NOT_CREDITED
+    assert verdicts.verdict(estimate) == verdicts.NOT_CREDITED
     same = st.improvement_interval([(np.ones(5), np.ones(5))])  # all tied: the interval is the point
-    assert (same.value, same.low, same.high) == (0.5, 0.5, 0.5) and st.verdict(same) == st.NOT_CREDITED
+    assert (same.value, same.low, same.high) == (0.5, 0.5, 0.5) and verdicts.verdict(same) == verdicts.NOT_CREDITED
 
 
 def test_a_clearly_better_method_is_credited_and_a_clearly_worse_one_is_worse():
     rng = np.random.default_rng(1)
     good, bad = rng.normal(5.0, 1.0, 10), rng.normal(0.0, 1.0, 10)
-    assert st.verdict(st.improvement_interval([(good, bad)])) == st.CREDITED
-    assert st.verdict(st.improvement_interval([(bad, good)])) == st.WORSE
+    assert verdicts.verdict(st.improvement_interval([(good, bad)])) == verdicts.CREDITED
+    assert verdicts.verdict(st.improvement_interval([(bad, good)])) == verdicts.WORSE
     # One seed each: no interval, so no credit either way.
     one = st.improvement_interval([(good[:1], bad[:1])])
-    assert one.value == 1.0 and np.isnan(one.low) and st.verdict(one) == st.NOT_CREDITED
+    assert one.value == 1.0 and np.isnan(one.low) and verdicts.verdict(one) == verdicts.NOT_CREDITED
 
 
 def test_area_under_the_curve_over_log_budget():

@@ -8,7 +8,7 @@ from conftest import ROOT, TINY
 
 from tatl_mj import suite
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.experiments.results import summary
+from tatl_mj.experiments.results import notes
 from tatl_mj.experiments.run import evaluation, method_unit, source_unit
 from tatl_mj.suite import bicycle
 
@@ -60,14 +60,19 @@ def test_summary_reports_the_iqm_over_seeds_of_each_seeds_mean():
             "m": {
                 "seeds": [0, 1, 2, 3],
                 "final_return": [1.0] * 4,
-                "curve": {"samples": [10], "mean_return": [[1.0]] * 4},
+                "curve": {
+                    "samples": [10],
+                    "mean_return": [[1.0]] * 4,
+                    "target_transitions": [[10]] * 4,
+                    "rollout_transitions": [[0]] * 4,
+                },
                 "final_steadiness": per_seed,
             }
         },
         "source_seeds": [0, 1, 2, 3],
         "random_returns": [0.0] * 4,
     }
-    summary._steadiness(experiment)
+    notes.steadiness(experiment)
     result = experiment["methods"]["m"]["steadiness"]["roll_rms"]
     assert result["per_seed"] == pytest.approx([0.001, 0.011, 0.021, 0.031])
     assert result["value"] == pytest.approx(np.mean([0.011, 0.021]))  # the middle half of four seeds
@@ -79,7 +84,12 @@ def test_steadiness_uses_the_compared_seeds_whose_records_carry_it_and_survival_
             "m": {
                 "seeds": [0, 1, 2],
                 "final_return": [1.0] * 3,
-                "curve": {"samples": [10], "mean_return": [[1.0]] * 3},
+                "curve": {
+                    "samples": [10],
+                    "mean_return": [[1.0]] * 3,
+                    "target_transitions": [[10]] * 3,
+                    "rollout_transitions": [[0]] * 3,
+                },
                 "final_steadiness": {"1": {"roll_rms": [0.02]}, "2": {"roll_rms": [0.04]}},  # seed 0's is older
                 "final_steps": {"0": [10, 10], "1": [5, 10], "2": [10, 10]},
             }
@@ -87,8 +97,8 @@ def test_steadiness_uses_the_compared_seeds_whose_records_carry_it_and_survival_
         "source_seeds": [0, 1, 2],
         "random_returns": [0.0] * 3,
     }
-    summary._steadiness(experiment)
-    summary._survival(experiment, cap=10)
+    notes.steadiness(experiment)
+    notes.survival(experiment, cap=10)
     data = experiment["methods"]["m"]
     assert data["steadiness_seeds"] == [1, 2] and data["steadiness"]["roll_rms"]["per_seed"] == [0.02, 0.04]
     assert data["survival"]["seeds"] == [0, 1, 2] and data["survival"]["at_cap"] == pytest.approx(5 / 6)

@@ -9,8 +9,8 @@ from conftest import ROOT, TINY
 
 from tatl_mj.experiments import spec as spec_mod
 from tatl_mj.experiments.report import credit_maps, tables
-from tatl_mj.experiments.results import statistics as stats
 from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results.summary_data import Experiment
 from tatl_mj.experiments.run import runner
 
 COSTS = ("physics_substeps", "blob_sha256")
@@ -73,9 +73,10 @@ def test_the_credit_of_a_method_against_itself_sits_at_one_half():
     scores = np.random.default_rng(0).normal(size=10)
     answer = verdicts.answer(scores, scores.copy()).as_dict()
     assert answer["probability"]["value"] == 0.5 and answer["probability"]["low"] < 0.5 < answer["probability"]["high"]
-    assert answer["verdict"] == stats.NOT_CREDITED
+    assert answer["verdict"] == verdicts.NOT_CREDITED
     pair = {"method": "m", "other": "m-copy", "role": "ablation", "final": answer, "efficiency": answer}
-    cells = [({"gain": g}, {"verdicts": [pair], "methods": {}}) for g in (0.5, 1.0)]
+    experiment = Experiment.from_json("toy", {"verdicts": [pair], "methods": {}})
+    cells = [({"gain": g}, experiment) for g in (0.5, 1.0)]
     table = tables.credit_table("toy", cells)
     assert table.splitlines()[2] == "| gain | `m` > `m-copy`: final; efficiency |"
     assert table.splitlines()[4] == (
@@ -83,16 +84,30 @@ def test_the_credit_of_a_method_against_itself_sits_at_one_half():
     )
 
 
+def typed(exp: dict) -> Experiment:
+    """A hand-made experiment of a summary, each method with no seed but its ``final_iqm``."""
+    curve = {"samples": [], "mean_return": [], "target_transitions": [], "rollout_transitions": []}
+    methods = {m: {"seeds": [], "final_return": [], "curve": curve, **d} for m, d in exp["methods"].items()}
+    return Experiment.from_json("toy", {**exp, "methods": methods})
+
+
 @pytest.mark.parametrize("two", [False, True], ids=["one-parameter", "two-parameters"])
 def test_credit_map_draws_each_conditions_estimate_with_its_interval(tmp_path, drawn, two):
 
     def exp(p):
-        answer = {"probability": {"value": p, "low": p - 0.1, "high": p + 0.1}, "verdict": "not credited"}
-        final = {**answer, "probability": {"value": 0.5, "low": 0.2, "high": 0.8}}
-        return {
-            "verdicts": [{"method": "m", "other": "a", "role": "ablation", "efficiency": answer, "final": final}],
-            "methods": {"m": {"final_iqm": {"value": 0.5, "low": 0.4, "high": 0.6}}},
+        seeds = {"better": 5, "tied": 0, "worse": 5}
+        answer = {
+            "probability": {"value": p, "low": p - 0.1, "high": p + 0.1},
+            "seeds": seeds,
+            "verdict": "not credited",
         }
+        final = {**answer, "probability": {"value": 0.5, "low": 0.2, "high": 0.8}}
+        return typed(
+            {
+                "verdicts": [{"method": "m", "other": "a", "role": "ablation", "efficiency": answer, "final": final}],
+                "methods": {"m": {"final_iqm": {"value": 0.5, "low": 0.4, "high": 0.6}}},
+            }
+        )
 
     conditions = [{"g": 1, "s": 2}, {"g": 1, "s": 3}] if two else [{"g": 1}, {"g": 2}]
     credit_maps.credit_map("toy", [(c, exp(p)) for c, p in zip(conditions, (0.3, 0.8))], tmp_path / "c.png")
@@ -111,7 +126,7 @@ def test_credit_map_clips_a_baselines_blow_up_and_marks_it(tmp_path, drawn):
         return {"final_iqm": {"value": v, "low": v - 0.05, "high": v + 0.05}}
 
     cells = [
-        ({"g": g}, {"verdicts": [], "methods": {"m": final(0.8), "base": final(b)}})
+        ({"g": g}, typed({"verdicts": [], "methods": {"m": final(0.8), "base": final(b)}}))
         for g, b in ((1, 0.9), (2, 0.7), (3, -15.0))
     ]
     credit_maps.credit_map("toy", cells, tmp_path / "c.png")

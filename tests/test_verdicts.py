@@ -1,7 +1,7 @@
-"""The verdict rule (tatl_mj.experiments.results.verdicts, statistics): known answers, declared before any rerun.
+"""The verdict rule (tatl_mj.experiments.results.verdicts): known answers, declared before any rerun.
 
 The five cases the rule must get right (docs/protocol.md, "Verdicts"), each through the
-whole path a run takes (summary._statistics on a summary experiment), then the pieces
+rule's whole path (``verdicts.scored`` per method, then ``verdicts.judge``), then the pieces
 against independent computations.
 """
 
@@ -13,8 +13,9 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
-from tatl_mj.experiments.results import statistics as st
-from tatl_mj.experiments.results import summary, verdicts
+from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results import verdicts as st
+from tatl_mj.experiments.results.summary_data import Curve, Interval, MethodSummary
 
 BUDGETS = [100, 1000, 10000]
 REFERENCE = 10.0
@@ -48,8 +49,18 @@ def _experiment(runs: dict, counts: dict | None = None, rollouts: dict | None = 
 
 def _judged(runs: dict, spec_methods: dict, **kwargs) -> dict:
     exp = _experiment(runs, **kwargs)
-    summary._statistics(exp, {"methods": spec_methods})
-    return {(v["method"], v["other"]): v for v in exp["verdicts"]}
+    per_seed: dict = {q: {} for q in verdicts.QUESTIONS}
+    paper = {}
+    for name, data in exp["methods"].items():
+        curve = data["curve"]
+        randoms = np.asarray(exp["random_returns"])
+        scored = verdicts.scored(
+            curve["mean_return"], randoms, REFERENCE, curve["target_transitions"], curve["rollout_transitions"], BUDGETS
+        )
+        per_seed[verdicts.FINAL][name] = scored.final
+        per_seed[verdicts.EFFICIENCY][name] = scored.efficiency[verdicts.COUNTED]
+        paper[name] = scored.efficiency[verdicts.PAPER]
+    return {(v["method"], v["other"]): v for v in verdicts.judge({"methods": spec_methods}, per_seed, paper)}
 
 
 SPEC = {"ta-tl": {}, "apprentice-fqi": {}}
@@ -250,13 +261,12 @@ def test_holm_is_reported_within_the_family_beside_the_unadjusted_verdict():
 
 
 def test_the_best_baseline_is_chosen_per_question_by_its_iqm():
-    exp = {
-        "methods": {
-            "rl-reset": {"final_iqm": {"value": 1.0}, "efficiency": {"value": 0.4}},
-            "uma-tl-reset": {"final_iqm": {"value": 1.0}, "efficiency": {"value": 0.6}},
-            "rl": {"final_iqm": {"value": -3.0}, "efficiency": {"value": -1.0}},
-            "ta-tl": {"final_iqm": {"value": 9.0}, "efficiency": {"value": 9.0}},
-        }
-    }
-    chosen = verdicts.choose_best_baseline(exp, ["uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset"])
+    def iqm(final: float, efficiency: float) -> MethodSummary:
+        curve = Curve((), (), (), ())
+        return MethodSummary(
+            (), (), curve, final_iqm=Interval(final, None, None), efficiency=Interval(efficiency, None, None)
+        )
+
+    methods = {"rl-reset": iqm(1.0, 0.4), "uma-tl-reset": iqm(1.0, 0.6), "rl": iqm(-3.0, -1.0), "ta-tl": iqm(9.0, 9.0)}
+    chosen = verdicts.choose_best_baseline(methods, ["uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset"])
     assert chosen == {"final": "rl-reset", "efficiency": "uma-tl-reset"}  # a tie goes to the one listed first

@@ -12,30 +12,31 @@ import numpy as np
 from tatl_mj.experiments.report.figures import LINE_STYLES, axis_limits, mark_clipped
 from tatl_mj.experiments.report.style import method_colors, order
 from tatl_mj.experiments.results import verdicts
-from tatl_mj.experiments.results.summary import REFERENCE_THRESHOLD
+from tatl_mj.experiments.results.comparison import REFERENCE_THRESHOLD
+from tatl_mj.experiments.results.summary_data import Experiment, Interval, PairVerdict, Summary
 
 
-def sweeps(summary: dict) -> dict[str, list[tuple[dict, dict]]]:
+def sweeps(summary: Summary) -> dict[str, list[tuple[dict, Experiment]]]:
     """Sweep name -> its conditions in run order, each as (swept values, experiment)."""
-    out: dict[str, list[tuple[dict, dict]]] = {}
-    for exp in summary["experiments"].values():
-        spec = exp.get("spec") or {}
+    out: dict[str, list[tuple[dict, Experiment]]] = {}
+    for exp in summary.experiments.values():
+        spec = exp.spec
         if spec.get("condition"):
             out.setdefault(spec.get("streams") or spec["name"], []).append((spec["condition"], exp))
     return out
 
 
-def _credit_pairs(exp: dict) -> list[dict]:
+def _credit_pairs(exp: Experiment) -> list[PairVerdict]:
     """The experiment's pairs that credit transfer: against the ablation and the placebo."""
-    return [v for v in exp.get("verdicts", []) if v["role"] in (verdicts.ABLATION, verdicts.PLACEBO)]
+    return [v for v in exp.verdicts or () if v.role in (verdicts.ABLATION, verdicts.PLACEBO)]
 
 
 def _heat_map(
     fig: Any,
     ax: Any,
-    cells: list[tuple[dict, dict]],
+    cells: list[tuple[dict, Experiment]],
     params: list[str],
-    estimate_of: Callable[[dict], tuple[float, float, float] | None],
+    estimate_of: Callable[[Experiment], tuple[float, float, float] | None],
     cmap: str,
     limits: tuple[float | None, float | None],
 ) -> None:
@@ -64,7 +65,7 @@ def _heat_map(
     fig.colorbar(image, ax=ax)
 
 
-def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> Path:
+def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path) -> Path:
     """For one sweep: (left) P(method > its ablation or placebo) with its 95% interval over the
     swept parameter (curves; a heat map of the first pair for two parameters); (right) each
     method's normalised final IQM with its band (curves; the first transfer method's for two)."""
@@ -75,20 +76,19 @@ def credit_map(name: str, cells: list[tuple[dict, dict]], path: str | Path) -> P
 
     params = list(cells[0][0])
     fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4))
-    pairs = sorted({(p["role"], p["method"], p["other"]) for _, exp in cells for p in _credit_pairs(exp)})
-    methods = sorted({m for _, exp in cells for m, d in exp["methods"].items() if "final_iqm" in d}, key=order)
+    pairs = sorted({(p.role, p.method, p.other) for _, exp in cells for p in _credit_pairs(exp)})
+    methods = sorted({m for _, exp in cells for m, d in exp.methods.items() if d.final_iqm is not None}, key=order)
     colors = method_colors(methods)
+    missing = Interval(None, None, None)
 
-    def estimate(exp: dict, key: tuple, question: str = verdicts.EFFICIENCY) -> tuple[float, float, float]:
-        pair = next((p for p in _credit_pairs(exp) if (p["role"], p["method"], p["other"]) == key), None)
-        e = ((pair or {}).get(question) or {}).get("probability") or {}
-        value = np.nan if e.get("value") is None else e["value"]
-        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+    def estimate(exp: Experiment, key: tuple, question: str = verdicts.EFFICIENCY) -> tuple[float, float, float]:
+        pair = next((p for p in _credit_pairs(exp) if (p.role, p.method, p.other) == key), None)
+        answer = None if pair is None else pair.answer(question)
+        return (missing if answer is None else answer.probability).bounds()
 
-    def final(exp: dict, method: str) -> tuple[float, float, float]:
-        e = exp["methods"].get(method, {}).get("final_iqm") or {}
-        value = np.nan if e.get("value") is None else e["value"]
-        return value, value if e.get("low") is None else e["low"], value if e.get("high") is None else e["high"]
+    def final(exp: Experiment, method: str) -> tuple[float, float, float]:
+        data = exp.methods.get(method)
+        return (missing if data is None or data.final_iqm is None else data.final_iqm).bounds()
 
     if len(params) == 1:
         x = np.arange(len(cells))

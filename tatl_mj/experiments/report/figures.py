@@ -1,7 +1,7 @@
 """`tatl plot`'s figures: per experiment its learning curves on both accountings and its paired
 verdicts, and the performance profiles across experiments.
 
-Everything is drawn from the run's summary (:mod:`tatl_mj.experiments.results.summary`), so a figure
+Everything is drawn from the run's summary (:mod:`tatl_mj.experiments.results.summary_data`), so a figure
 and the tables show the same seeds and numbers. Where the experiment declares a reference
 return (every shipped preset does):
 
@@ -32,13 +32,14 @@ import numpy as np
 from tatl_mj.experiments.report.style import compact, method_colors, method_label, order, spaced_ticks
 from tatl_mj.experiments.report.tables import seed_note
 from tatl_mj.experiments.results import verdicts
-from tatl_mj.experiments.results.summary import (
+from tatl_mj.experiments.results.comparison import (
     REFERENCE_THRESHOLD,
     THRESHOLD_FRACTION,
     Comparison,
     MethodResult,
-    compare,
+    comparison_of,
 )
+from tatl_mj.experiments.results.summary_data import Experiment, MethodSummary, Summary
 
 LINE_STYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))  # cycled, so overlapping curves both show
 MARKERS = ("o", "s", "D", "^", "v", "P", "X", "h", "<", ">")  # cycled, so coinciding points both show
@@ -97,24 +98,16 @@ def mark_clipped(ax: Any, x: np.ndarray, y: np.ndarray, limits: tuple[float, flo
     return int(below.sum() + above.sum())
 
 
-def figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str] | None = None) -> Path:
+def figure(name: str, experiment: Experiment, path: str | Path, methods: Sequence[str] | None = None) -> Path:
     """Draws one experiment's panels and caption to ``path``; returns it (see the module docstring)."""
-    if methods is None and any("iqm" in data for data in experiment["methods"].values()):
+    if methods is None and any(data.iqm is not None for data in experiment.methods.values()):
         return interval_figure(name, experiment, path)
     return _return_figure(name, experiment, path, methods)
 
 
-def counts_of(data: dict, accounting: str) -> np.ndarray:
-    """[seed][budget] transitions of one method on an accounting ("counted" or "paper"); a
-    reference that counts none stands at the budget."""
-    budgets = np.asarray(data["curve"]["samples"], dtype=np.float64)
-    counted = np.asarray(data["curve"]["target_transitions"], dtype=np.float64)
-    if accounting == "paper":
-        counted = counted - np.asarray(data["curve"]["rollout_transitions"], dtype=np.float64)
-    return np.where(counted > 0, counted, budgets)
-
-
-def _iqm_panel(ax: Any, experiment: dict, methods: list[str], colors: dict[str, str], accounting: str) -> list[Any]:
+def _iqm_panel(
+    ax: Any, experiment: Experiment, methods: list[str], colors: dict[str, str], accounting: str
+) -> list[Any]:
     """IQM of each method's normalised score against its median transitions on ``accounting``,
     with the 95% band; returns the legend handles."""
     from matplotlib.lines import Line2D
@@ -124,10 +117,12 @@ def _iqm_panel(ax: Any, experiment: dict, methods: list[str], colors: dict[str, 
     drawn: list[float] = []
     curves = []
     for i, method in enumerate(methods):
-        data = experiment["methods"][method]
-        x = np.median(counts_of(data, accounting), axis=0)
+        data = experiment.methods[method]
+        x = np.median(data.curve.transitions(accounting), axis=0)
+        iqm = data.iqm or ()
         value, low, high = (
-            np.array([np.nan if e[k] is None else e[k] for e in data["iqm"]]) for k in ("value", "low", "high")
+            np.array([np.nan if v is None else v for v in values])
+            for values in zip(*((e.value, e.low, e.high) for e in iqm))
         )
         curves.append((i, method, x, value, np.where(np.isnan(low), value, low), np.where(np.isnan(high), value, high)))
         drawn += [*value, *low[np.isfinite(low)], *high[np.isfinite(high)]]
@@ -178,29 +173,23 @@ def _repeats(x: np.ndarray, y: np.ndarray) -> dict[tuple[float, float], int]:
     return {p: n for p, n in seen.items() if n > 1 and all(math.isfinite(v) for v in p)}
 
 
-def _verdict_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> None:
+def _verdict_panel(ax: Any, experiment: Experiment, colors: dict[str, str]) -> None:
     """Each declared pair's paired P(method better on a seed) with its interval, final (circle)
     and efficiency (square) on one row, and the verdicts beside it."""
-    pairs = [p for p in experiment.get("verdicts", []) if not p.get("parents")]
-    words = {"credited": "credited", "worse": "worse", "not credited": "not credited"}
-    baseline_words = {"credited": "better", "worse": "worse", "not credited": "no clear difference"}
+    pairs = [p for p in experiment.verdicts or () if not p.parents]
     for row, pair in enumerate(pairs):
-        color = colors.get(pair["method"], "black")
+        color = colors.get(pair.method, "black")
         said = []
         for question, offset, marker in ((verdicts.FINAL, -0.17, "o"), (verdicts.EFFICIENCY, 0.17, "s")):
-            answer = pair.get(question)
-            if not answer:
+            answer = pair.answer(question)
+            if answer is None:
                 continue
-            estimate = answer["probability"]
-            value = estimate["value"]
-            low = value if estimate["low"] is None else estimate["low"]
-            high = value if estimate["high"] is None else estimate["high"]
+            value, low, high = answer.probability.bounds()
             ax.hlines(row + offset, low, high, color=color, lw=3.5, alpha=0.5)
             ax.plot([value], [row + offset], marker, color=color, markeredgecolor="black", ms=5)
-            chosen = baseline_words if pair["role"] == verdicts.BEST_BASELINE else words
-            said.append(f"{question[:3]}.: {chosen[answer['verdict']]}")
+            said.append(f"{question[:3]}.: {verdicts.words(pair.role)[answer.verdict]}")
         ax.text(1.02, row, "\n".join(said), va="center", fontsize=7, transform=ax.get_yaxis_transform())
-    labels = [f"{p['method']} > {p['other']}\n({p['role']})" for p in pairs]
+    labels = [f"{p.method} > {p.other}\n({p.role})" for p in pairs]
     ax.set_yticks(range(len(pairs)), labels, fontsize=7)
     ax.set_ylim(len(pairs) - 0.5, -0.5)
     ax.axvline(0.5, color="black", ls="--", lw=0.9)
@@ -212,27 +201,27 @@ def _verdict_panel(ax: Any, experiment: dict, colors: dict[str, str]) -> None:
     ax.grid(axis="x", alpha=0.25)
 
 
-def interval_figure(name: str, experiment: dict, path: str | Path) -> Path:
+def interval_figure(name: str, experiment: Experiment, path: str | Path) -> Path:
     """The interval figure (see :func:`figure`): IQM bands on both accountings and the paired verdicts."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    methods = sorted((m for m, d in experiment["methods"].items() if "iqm" in d), key=order)
+    methods = sorted((m for m, d in experiment.methods.items() if d.iqm is not None), key=order)
     colors = method_colors(methods)
-    pairs = len([p for p in experiment.get("verdicts", []) if not p.get("parents")])
+    pairs = len([p for p in experiment.verdicts or () if not p.parents])
     fig, (ax_counted, ax_paper, ax_pairs) = plt.subplots(
         1, 3, figsize=(17, 5), gridspec_kw={"width_ratios": [1.2, 1.2, 1]}
     )
     handles = _iqm_panel(ax_counted, experiment, methods, colors, "counted")
     _iqm_panel(ax_paper, experiment, methods, colors, "paper")
     _verdict_panel(ax_pairs, experiment, colors)
-    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
+    fig.suptitle(experiment.spec.get("title", name), fontsize=11)
     ncol = 5
     legend_rows = math.ceil(len(handles) / ncol)
-    reference = experiment.get("reference_return")
-    seeds = list(compare(experiment).seeds)
+    reference = experiment.reference_return
+    seeds = list(comparison_of(experiment).seeds)
     caption = (
         f"Compared over seeds {seeds}. Normalised score: (R - R_random) / (R_reference - R_random), R an "
         "undiscounted episode return (mean over the evaluation episodes), R_random the random policy's on the "
@@ -269,7 +258,7 @@ def _label_curve_axes(ax: Any, x_ticks: list[float], xlabel: str, ylabel: str, t
     ax.grid(alpha=0.25)
 
 
-def _return_figure(name: str, experiment: dict, path: str | Path, methods: Sequence[str] | None = None) -> Path:
+def _return_figure(name: str, experiment: Experiment, path: str | Path, methods: Sequence[str] | None = None) -> Path:
     """Per-seed returns and samples to threshold (no normalised scores)."""
     import matplotlib
 
@@ -277,8 +266,8 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    shown = sorted(experiment["methods"], key=order) if methods is None else list(methods)
-    comparison = compare(experiment, shown)
+    shown = sorted(experiment.methods, key=order) if methods is None else list(methods)
+    comparison = comparison_of(experiment, shown)
     results = comparison.methods
     colors = method_colors([r.method for r in results])
     fig, (ax_curve, ax_len) = plt.subplots(1, 2, figsize=(11, 4.0))
@@ -311,29 +300,29 @@ def _return_figure(name: str, experiment: dict, path: str | Path, methods: Seque
     ax_len.set_xlim(-0.6, len(results) - 0.4)
     ax_len.grid(axis="y", alpha=0.25)
 
-    fig.suptitle(experiment["spec"].get("title", name), fontsize=11)
-    _lay_out(fig, handles, ticks, many, _caption(comparison, clipped_values, experiment.get("reference_return")))
+    fig.suptitle(experiment.spec.get("title", name), fontsize=11)
+    _lay_out(fig, handles, ticks, many, _caption(comparison, clipped_values, experiment.reference_return))
     path = Path(path)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
 
 
-def _seed_curves(experiment: dict, results: Sequence[MethodResult]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def _seed_curves(experiment: Experiment, results: Sequence[MethodResult]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per method, its compared seeds' (target transitions counted, mean return) at each budget."""
     curves = {}
     for r in results:
-        data = experiment["methods"][r.method]
-        rows = [data["seeds"].index(s) for s in r.seeds]
+        data = experiment.methods[r.method]
+        rows = data.rows(r.seeds)
         curves[r.method] = (
-            counts_of(data, "counted")[rows],
-            np.asarray(data["curve"]["mean_return"], dtype=np.float64)[rows],
+            data.curve.transitions(verdicts.COUNTED)[rows],
+            np.asarray(data.curve.mean_return, dtype=np.float64)[rows],
         )
     return curves
 
 
 def _curve_panel(
-    ax: Any, experiment: dict, comparison: Comparison, colors: dict[str, str], references: list[float]
+    ax: Any, experiment: Experiment, comparison: Comparison, colors: dict[str, str], references: list[float]
 ) -> tuple[list[Any], list[float]]:
     """Panel (a): thin per-seed lines, a thick median, references; returns the legend handles
     and the values drawn clipped."""
@@ -423,7 +412,7 @@ def _draw_seed_curves(
 
 
 def _threshold_panel(
-    ax: Any, experiment: dict, results: Sequence[MethodResult], colors: dict[str, str], spread: Any
+    ax: Any, experiment: Experiment, results: Sequence[MethodResult], colors: dict[str, str], spread: Any
 ) -> list[str]:
     """Panel (b) with a threshold: each seed's target transitions to it, 'never' on a row of its own;
     returns the method tick labels."""
@@ -436,9 +425,10 @@ def _threshold_panel(
         ax.scatter(i + np.asarray(spread), values, color="black", s=12, zorder=3)
     ax.set_yscale("log")
     ax.axhspan(largest * 1.7, never * 1.8, color="0.92", zorder=0)
-    smallest = min(min(experiment["methods"][r.method]["curve"]["samples"]) for r in results)
+    methods: dict[str, MethodSummary] = {r.method: experiment.methods[r.method] for r in results}
+    smallest = min(min(m.curve.samples) for m in methods.values())
     ax.set_ylim(smallest / 1.6, never * 1.8)
-    budget_ticks = sorted({b for r in results for b in experiment["methods"][r.method]["curve"]["samples"]})
+    budget_ticks = sorted({b for m in methods.values() for b in m.curve.samples})
     budget_ticks = spaced_ticks(budget_ticks, max(0.1, math.log10(never / smallest) / 12))
     ax.set_yticks(budget_ticks + [never], [compact(b) for b in budget_ticks] + ["never"])
     ax.minorticks_off()
@@ -524,7 +514,7 @@ def _caption(comparison: Comparison, clipped_values: list[float], reference: flo
     return "\n".join(textwrap.wrap(" ".join(parts), width=170))
 
 
-def profile(summary: dict, path: str | Path) -> Path:
+def profile(summary: Summary, path: str | Path) -> Path:
     """Performance profiles: the fraction of runs above each normalised score, per method."""
     import matplotlib
 
@@ -533,14 +523,14 @@ def profile(summary: dict, path: str | Path) -> Path:
 
     from tatl_mj.experiments.results.statistics import performance_profile
 
-    rows = summary["aggregate"]
+    rows = summary.aggregate
     taus = np.linspace(-0.5, 1.5, 201)
     colors = method_colors(sorted(rows))
     fig, ax = plt.subplots(figsize=(10.5, 4.8))
-    for i, name in enumerate(sorted(rows, key=lambda m: -(rows[m]["value"] or -math.inf))):
+    for i, name in enumerate(sorted(rows, key=lambda m: -(rows[m].estimate.value or -math.inf))):
         style = ("-", "--", ":", "-.")[i % 4]  # identical curves stay visible
-        ax.plot(taus, performance_profile(rows[name]["scores"], taus), style, color=colors[name], lw=1.6,
-                label=f"{method_label(name)} ({rows[name]['experiments']} exp.)")  # fmt: skip
+        ax.plot(taus, performance_profile(rows[name].scores, taus), style, color=colors[name], lw=1.6,
+                label=f"{method_label(name)} ({rows[name].experiments} exp.)")  # fmt: skip
     ax.set_xlabel("normalised final score tau ((R - R_random) / (R_reference - R_random))")
     ax.set_ylabel("fraction of runs with score > tau")
     ax.set_title("Performance profiles over every experiment and seed", fontsize=10)
@@ -553,4 +543,4 @@ def profile(summary: dict, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["axis_limits", "counts_of", "figure", "interval_figure", "mark_clipped", "profile"]
+__all__ = ["axis_limits", "figure", "interval_figure", "mark_clipped", "profile"]

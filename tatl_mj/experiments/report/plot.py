@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from tatl_mj.experiments.report import credit_maps, figures, tables
-from tatl_mj.experiments.results.records import read_record
-from tatl_mj.experiments.results.summary import compare
+from tatl_mj.experiments.results import summary_data
+from tatl_mj.experiments.results.comparison import comparison_of
 
 
 def plot(run_dir: str | Path) -> list[Path]:
@@ -16,15 +16,15 @@ def plot(run_dir: str | Path) -> list[Path]:
     summary_path = run_dir / "summary.json"
     if not summary_path.exists():
         raise FileNotFoundError(f"{summary_path} not found: run `tatl run ... --out {run_dir}` first")
-    summary = read_record(summary_path)  # an older schema's upgraded
+    summary = summary_data.read(summary_path)  # an older schema's upgraded
     out = run_dir / "figures"
     out.mkdir(exist_ok=True)
     written = []
-    for name, experiment in summary["experiments"].items():
-        if not compare(experiment).seeds:
+    for name, experiment in summary.experiments.items():
+        if not comparison_of(experiment).seeds:
             continue
         written.append(figures.figure(name, experiment, out / f"{name}.png"))
-    if summary.get("aggregate"):
+    if summary.aggregate:
         written.append(figures.profile(summary, out / "performance_profile.png"))
     credit = []
     for name, cells in credit_maps.sweeps(summary).items():

@@ -6,6 +6,10 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from tatl_mj.experiments.results.summary_data import Interval
 
 COLORS = {"ta-tl": "#d62728", "uma-tl": "#1f77b4", "rl": "#2ca02c"}
 LABELS = {"ta-tl": "TA-TL (paper, Alg. 1)", "uma-tl": "UMA-TL", "rl": "RL (no transfer)"}
@@ -67,13 +71,13 @@ def spaced_ticks(values: Sequence[float], min_gap: float) -> list[float]:
     return sorted(kept)
 
 
-def interval_text(estimate: dict | None, fmt: str = ".2f") -> str:
+def interval_text(estimate: Interval | None, fmt: str = ".2f") -> str:
     """``value [low, high]`` of a summary estimate; "(no interval)" where it has none."""
-    if not estimate or estimate.get("value") is None:
+    if estimate is None or estimate.value is None:
         return "n/a"
-    if estimate.get("low") is None:
-        return f"{estimate['value']:{fmt}} (no interval)"
-    return f"{estimate['value']:{fmt}} [{estimate['low']:{fmt}}, {estimate['high']:{fmt}}]"
+    if estimate.low is None:
+        return f"{estimate.value:{fmt}} (no interval)"
+    return f"{estimate.value:{fmt}} [{estimate.low:{fmt}}, {estimate.high:{fmt}}]"
 
 
 def samples_text(value: float | None) -> str:

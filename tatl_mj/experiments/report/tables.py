@@ -1,7 +1,7 @@
 """The markdown a run's summary reads as: results.md's tables, the sweeps' credit tables, and the
 headline tables the README and docs/results-paper.md print (``paper_table``, ``verdict_table``).
 
-Everything is read from summary.json (:mod:`tatl_mj.experiments.results.summary`): a table and the
+Everything is read from summary.json (:mod:`tatl_mj.experiments.results.summary_data`): a table and the
 figures of the same run show the same seeds and numbers. The definitions behind the columns
 live once, in docs/protocol.md; :func:`table` opens with a short key.
 """
@@ -9,27 +9,20 @@ live once, in docs/protocol.md; :func:`table` opens with a short key.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from tatl_mj.experiments.report.style import interval_text, method_label, order, samples_text, seed_range
-from tatl_mj.experiments.results import statistics as stats
 from tatl_mj.experiments.results import verdicts
-from tatl_mj.experiments.results.summary import (
-    REFERENCE_THRESHOLD,
-    THRESHOLD_FRACTION,
-    Comparison,
-    ablation_sentences,
-    compare,
-    known_kernels,
-)
+from tatl_mj.experiments.results.comparison import Comparison, comparison_of
+from tatl_mj.experiments.results.summary_data import Answer, Experiment, Interval, PairVerdict, Summary
 
 PAPER_METHODS = ("ta-tl", "uma-tl", "rl")
 """The paper's three methods, on its protocol (the shared random-policy stream)."""
 
-VERDICT_WORDS = {"credited": "**credited**", "worse": "**worse**", "not credited": "not credited"}
-BASELINE_WORDS = {"credited": "**better**", "worse": "**worse**", "not credited": "no clear difference"}
+VERDICT_WORDS = verdicts.words(verdicts.ABLATION, marked=True)
+BASELINE_WORDS = verdicts.words(verdicts.BEST_BASELINE, marked=True)
 ROLE_WORDS = {verdicts.ABLATION: "source-free", verdicts.PLACEBO: "placebo", verdicts.BEST_BASELINE: "best baseline"}
 HOLM_MARK = "†"
 
@@ -37,19 +30,19 @@ HOLM_MARK = "†"
 # --- results.md -----------------------------------------------------------------------
 
 
-def table(summary: dict) -> str:
+def table(summary: Summary) -> str:
     """results.md's experiment sections: per experiment its methods, then its verdicts."""
     lines = [_preamble(summary), ""]
-    for name, exp in summary["experiments"].items():
-        lines += _experiment_section(summary, name, exp)
+    for exp in summary.experiments.values():
+        lines += _experiment_section(summary, exp)
     return "\n".join(lines)
 
 
-def _preamble(summary: dict) -> str:
+def _preamble(summary: Summary) -> str:
     """The key above the tables (the definitions: docs/protocol.md)."""
     return (
-        f"Preset `{summary['preset']}`, seeds {summary['seeds']}; verdict rule version "
-        f"{summary.get('verdict_rule_version', 1)} (docs/protocol.md defines every column). Methods are compared "
+        f"Preset `{summary.preset}`, seeds {summary.seeds}; verdict rule version "
+        f"{summary.verdict_rule_version} (docs/protocol.md defines every column). Methods are compared "
         "over the seeds they all finished, seed by seed (the seeds of an experiment share their source policy, "
         "target samples and evaluation starts). Normalised score: 0 the random policy, 1 the experiment's "
         "reference return. *counted*: every real-target transition a method used, Algorithm 2's rollouts of the "
@@ -59,8 +52,8 @@ def _preamble(summary: dict) -> str:
         "*final* (at the largest budget) and *efficiency*: P = (seeds better + ties / 2) / seeds, with its exact "
         "95% interval; **credited** / **better** when it lies above 0.5, **worse** below, not credited / no clear "
         f"difference otherwise; {HOLM_MARK}: the verdict also holds under Holm's correction within the experiment's "
-        f"family. Threshold: a normalised score of {summary.get('reference_threshold', REFERENCE_THRESHOLD)} "
-        f"(without a reference: {summary.get('threshold_fraction', THRESHOLD_FRACTION):.0%} of the best method's gap); "
+        f"family. Threshold: a normalised score of {summary.reference_threshold} "
+        f"(without a reference: {summary.threshold_fraction:.0%} of the best method's gap); "
         "transitions to it: those counted at the smallest budget from which a seed stays at or above it. Data: "
         "`shared` (the random-policy stream every method shares), `reset` (privileged: one-step transitions from "
         "states spread over the target's box), `online` (epsilon-greedy episodes), `stream`/`source-policy` "
@@ -68,13 +61,13 @@ def _preamble(summary: dict) -> str:
     )
 
 
-def _kernels_sentence(summary: dict) -> str:
+def _kernels_sentence(summary: Summary) -> str:
     """Which arithmetic kernels computed the records (per-seed returns depend on them), so a
     table copied elsewhere still says what produced it; empty when no record names them."""
-    known = known_kernels(summary)
+    known = summary.known_kernels
     if not known:
         return ""
-    older = sum((summary.get("kernels") or {}).values()) - sum(known.values())
+    older = sum(summary.kernels.values()) - sum(known.values())
     sets = ", ".join(f"`{k}` ({n:,} records)" for k, n in sorted(known.items()))
     rest = f"; {older:,} older records do not name theirs" if older else ""
     return (
@@ -96,15 +89,15 @@ def seed_note(comparison: Comparison) -> str:
     return "Seed sets differ: " + "; ".join(parts) + "."
 
 
-def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
+def _experiment_section(summary: Summary, exp: Experiment) -> list[str]:
     """One experiment's heading, verdicts, method table and footnote."""
-    methods = sorted(exp["methods"], key=order)
+    methods = sorted(exp.methods, key=order)
     # Methods the experiment's own spec lists but that finished no seed are flagged;
     # other experiments' methods are not this one's business.
-    listed = list((exp.get("spec") or {}).get("methods") or summary.get("methods", methods))
-    comparison = compare(exp, methods + [m for m in listed if m not in methods])
-    lines = [f"### {exp['spec'].get('title', name)} (`{name}`)", ""]
-    claim = exp["spec"].get("paper_claim")
+    listed = list(exp.spec_methods or summary.methods)
+    comparison = comparison_of(exp, methods + [m for m in listed if m not in methods])
+    lines = [f"### {exp.spec.get('title', exp.name)} (`{exp.name}`)", ""]
+    claim = exp.spec.get("paper_claim")
     if claim:
         lines += [f"Paper: {claim}", ""]
     note = seed_note(comparison)
@@ -117,9 +110,11 @@ def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
     if not comparison.meaningful:
         lines += [_no_threshold_sentence(comparison), ""]
     # The verdicts first, then the methods' numbers they rest on.
-    if "verdicts" in exp:
+    if exp.verdicts is not None:
         lines += _verdict_rows(exp) + [""]
-    elif sentences := ablation_sentences(exp, comparison):  # no reference return: a sentence per ablation
+    elif sentences := verdicts.ablation_sentences(
+        exp.spec_methods, comparison
+    ):  # no reference return: a sentence per ablation
         lines += ["Transfer against its ablation without the source:", ""]
         lines += [f"- {v}" for v in sentences] + [""]
     lines += _method_rows(exp, comparison)
@@ -127,9 +122,9 @@ def _experiment_section(summary: dict, name: str, exp: dict) -> list[str]:
     return lines + _footnote(summary, exp, comparison)
 
 
-def _method_rows(exp: dict, comparison: Comparison) -> list[str]:
+def _method_rows(exp: Experiment, comparison: Comparison) -> list[str]:
     """The method table: one row per compared method."""
-    stats_on = any("efficiency" in exp["methods"][r.method] for r in comparison.methods)
+    stats_on = any(exp.methods[r.method].efficiency is not None for r in comparison.methods)
     header = "| method | data | final return: mean ± sd (median) | transitions to threshold, counted: median (seeds) "
     header += "| paper's accounting: median "
     if stats_on:
@@ -139,47 +134,48 @@ def _method_rows(exp: dict, comparison: Comparison) -> list[str]:
         )
     lines = [header + "|", "|---" * header.count("|") + "|"]
     for r in comparison.methods:
-        data = exp["methods"][r.method]
+        data = exp.methods[r.method]
         finals = np.asarray(r.final_returns)
         final = f"{finals.mean():.4g} ± {finals.std():.2g} ({np.median(finals):.4g})"
         if comparison.meaningful:
-            first = min(data["curve"]["samples"])
+            first = min(data.curve.samples)
             left = sum(1 for v in r.samples_to_threshold if math.isfinite(v) and v <= first)
             censored = f", {left} at the smallest budget" if left else ""
             counted = f"{samples_text(r.median_samples)} ({r.reached}/{len(r.seeds)} reached{censored})"
             paper = samples_text(r.median_samples_paper)
         else:
             counted, paper = "no meaningful threshold", "n/a"
-        row = f"| {method_label(r.method)} | {data['data']} | {final} | {counted} | {paper} "
+        row = f"| {method_label(r.method)} | {data.data} | {final} | {counted} | {paper} "
         if stats_on:
-            first_policy = data.get("first_policy") or {}
+            first_policy = data.first_policy or {}
             row += (
-                f"| {samples_text(first_policy.get('counted'))} / {samples_text(first_policy.get('paper'))} "
-                f"| {interval_text(data.get('final_iqm'))} | {interval_text(data.get('efficiency'))} "
-                f"| {interval_text(data.get('efficiency_paper'))} "
+                f"| {samples_text(first_policy.get(verdicts.COUNTED))} "
+                f"/ {samples_text(first_policy.get(verdicts.PAPER))} "
+                f"| {interval_text(data.final_iqm)} | {interval_text(data.efficiency)} "
+                f"| {interval_text(data.efficiency_paper)} "
             )
         lines.append(row + "|")
     return lines
 
 
-def answer_text(answer: dict | None, words: dict[str, str] = VERDICT_WORDS) -> tuple[str, str]:
+def answer_text(answer: Answer | None, words: dict[str, str] = VERDICT_WORDS) -> tuple[str, str]:
     """``(P [CI] (better/tied/worse), verdict)`` of one question of a pair, "-" where not asked."""
-    if not answer:
+    if answer is None:
         return "-", "-"
-    seeds = answer["seeds"]
-    mark = HOLM_MARK if answer.get("holm") else ""
+    seeds = answer.seeds
+    mark = HOLM_MARK if answer.holm else ""
     return (
-        f"{interval_text(answer['probability'])} ({seeds['better']}/{seeds['tied']}/{seeds['worse']})",
-        words[answer["verdict"]] + mark,
+        f"{interval_text(answer.probability)} ({seeds['better']}/{seeds['tied']}/{seeds['worse']})",
+        words[answer.verdict] + mark,
     )
 
 
-def _verdict_rows(exp: dict) -> list[str]:
+def _verdict_rows(exp: Experiment) -> list[str]:
     """The verdicts of the declared pairs, both questions each."""
-    pairs = exp.get("verdicts") or []
+    pairs = exp.verdicts or ()
     if not pairs:
         return ["No declared pair has both of its methods here: no verdict."]
-    families = exp.get("families") or {}
+    families = exp.families or {}
     lines = [
         f"Verdicts (P = (better + tied / 2) / seeds, seeds better/tied/worse in brackets; the family holds "
         f"{families.get('final', '?')} pairs asking *final* and {families.get('efficiency', '?')} asking "
@@ -191,26 +187,24 @@ def _verdict_rows(exp: dict) -> list[str]:
     ]
     for pair in pairs:
         final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
-        difference = (
-            interval_text((pair.get("final") or {}).get("median_difference"), "+.2f") if "final" in pair else "-"
-        )
-        against = f"`{pair['other']}` ({ROLE_WORDS[pair['role']]})"
-        if pair.get("parents"):
-            against += f" (the parent `{exp['spec'].get('streams')}`'s records)"
+        difference = "-" if pair.final is None else interval_text(pair.final.median_difference, "+.2f")
+        against = f"`{pair.other}` ({ROLE_WORDS[pair.role]})"
+        if pair.parents:
+            against += f" (the parent `{exp.spec.get('streams')}`'s records)"
         lines.append(
-            f"| `{pair['method']}` | {against} | {final_p} | {difference} | {final_v} "
+            f"| `{pair.method}` | {against} | {final_p} | {difference} | {final_v} "
             f"| {efficiency_p} | {efficiency_v} | {paper_v} |"
         )
     return lines
 
 
-def _capped_lines(exp: dict) -> list[str]:
+def _capped_lines(exp: Experiment) -> list[str]:
     """Survival to the episode cap and steadiness, where the target has them."""
     lines: list[str] = []
-    survived = {m: d["survival"] for m, d in exp["methods"].items() if "survival" in d}
+    survived = {m: d.survival for m, d in exp.methods.items() if d.survival is not None}
     if survived:
         parts = [
-            f"{method_label(m)} {v['at_cap']:.2f} ({v['episodes']} episodes, seeds {seed_range(v.get('seeds'))})"
+            f"{method_label(m)} {v.at_cap:.2f} ({v.episodes} episodes, seeds {seed_range(list(v.seeds))})"
             for m, v in survived.items()
         ]
         lines += [
@@ -218,25 +212,25 @@ def _capped_lines(exp: dict) -> list[str]:
             "Kaplan-Meier survival to the episode cap at the largest budget (episodes pooled over the "
             "compared seeds; only methods with an episode that ended early): " + "; ".join(parts) + ".",
         ]
-    steady = {m: d["steadiness"] for m, d in exp["methods"].items() if "steadiness" in d}
+    steady = {m: d.steadiness for m, d in exp.methods.items() if d.steadiness is not None}
     if steady:
-        seeds = sorted({seed_range(d.get("steadiness_seeds")) for d in exp["methods"].values() if "steadiness" in d})
+        seeds = sorted({seed_range(list(d.steadiness_seeds)) for d in exp.methods.values() if d.steadiness})
         lines += ["", _steadiness_sentence(steady) + f" Seeds: {'; '.join(seeds)}."]
     return lines
 
 
-def _footnote(summary: dict, exp: dict, comparison: Comparison) -> list[str]:
+def _footnote(summary: Summary, exp: Experiment, comparison: Comparison) -> list[str]:
     """The line under an experiment: random return, threshold rule, the area's range, the mapping's samples."""
     threshold = "none" if comparison.threshold is None else f"{comparison.threshold:.4g}"
-    mapping = sorted(set(exp.get("mapping_target_samples", [])))
-    reference_return = exp.get("reference_return")
+    mapping = sorted(set(exp.mapping_target_samples))
+    reference_return = exp.reference_return
     rule = (
         f"reference return {reference_return:.4g} (fixed; threshold at a normalised score of "
-        f"{summary.get('reference_threshold', REFERENCE_THRESHOLD)})"
+        f"{summary.reference_threshold})"
         if reference_return is not None
         else "no reference return declared: the threshold is relative to the best method listed"
     )
-    span = exp.get("efficiency_range")
+    span = exp.efficiency_range
     area = f"; efficiency over {span[0]:,.0f} to {span[1]:,.0f} transitions" if span else ""
     return [
         "",
@@ -246,7 +240,7 @@ def _footnote(summary: dict, exp: dict, comparison: Comparison) -> list[str]:
     ]
 
 
-def _steadiness_sentence(steady: dict) -> str:
+def _steadiness_sentence(steady: dict[str, Mapping[str, Interval]]) -> str:
     """One line: each method's steadiness at the largest budget (IQM over seeds [95% CI])."""
     units = {"roll_rms": ("roll RMS", "deg", 180 / math.pi), "mean_abs_action": ("mean |action|", "", 1.0)}
     parts = []
@@ -254,7 +248,9 @@ def _steadiness_sentence(steady: dict) -> str:
         shown = []
         for name, estimate in measures.items():
             label, unit, scale = units.get(name, (name, "", 1.0))
-            scaled = {k: None if estimate[k] is None else estimate[k] * scale for k in ("value", "low", "high")}
+            scaled = Interval(
+                *(None if v is None else v * scale for v in (estimate.value, estimate.low, estimate.high))
+            )
             shown.append(f"{label} {interval_text(scaled)}{' ' + unit if unit else ''}")
         parts.append(f"{method_label(method)}: " + ", ".join(shown))
     return (
@@ -272,9 +268,9 @@ def _no_threshold_sentence(comparison: Comparison) -> str:
     )
 
 
-def aggregate_table(summary: dict) -> str:
+def aggregate_table(summary: Summary) -> str:
     """Each method's IQM of normalised final scores over every experiment and seed it ran."""
-    rows = summary.get("aggregate") or {}
+    rows = summary.aggregate
     if not rows:
         return ""
     lines = [
@@ -288,30 +284,28 @@ def aggregate_table(summary: dict) -> str:
         "| method | experiments | runs | normalised final score: IQM [95% CI] |",
         "|---|---|---|---|",
     ]
-    for name in sorted(rows, key=lambda m: -(rows[m]["value"] or -math.inf)):
+    for name in sorted(rows, key=lambda m: -(rows[m].estimate.value or -math.inf)):
         r = rows[name]
-        lines.append(f"| {method_label(name)} | {r['experiments']} | {r['runs']} | {interval_text(r)} |")
+        lines.append(f"| {method_label(name)} | {r.experiments} | {r.runs} | {interval_text(r.estimate)} |")
     return "\n".join(lines) + "\n"
 
 
-def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
+def credit_table(name: str, cells: list[tuple[dict, Experiment]]) -> str:
     """Per sweep condition, each transfer method against its ablation and placebo, both questions."""
     credit = (verdicts.ABLATION, verdicts.PLACEBO)
-    keys = sorted(
-        {(v["method"], v["other"]) for _, exp in cells for v in exp.get("verdicts", []) if v["role"] in credit}
-    )
+    keys = sorted({(v.method, v.other) for _, exp in cells for v in exp.verdicts or () if v.role in credit})
     params = list(cells[0][0])
     header = "| " + " | ".join(params) + " | " + " | ".join(f"`{m}` > `{a}`: final; efficiency" for m, a in keys) + " |"
     lines = [f"### Credit map: `{name}`", "", header, "|---" * (len(params) + len(keys)) + "|"]
     for condition, exp in cells:
-        found = {(v["method"], v["other"]): v for v in exp.get("verdicts", [])}
+        found = {(v.method, v.other): v for v in exp.verdicts or ()}
         row = [str(condition[k]) for k in params]
         for key in keys:
             pair = found.get(key)
             if pair is None:
                 row.append("n/a")
                 continue
-            parts = [" ".join(answer_text(pair.get(q))) for q in verdicts.QUESTIONS]
+            parts = [" ".join(answer_text(pair.answer(q))) for q in verdicts.QUESTIONS]
             row.append("; ".join(parts))
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines + [""])
@@ -320,18 +314,18 @@ def credit_table(name: str, cells: list[tuple[dict, dict]]) -> str:
 # --- the headline tables --------------------------------------------------------------
 
 
-def _answer_cells(pair: dict) -> tuple[str, str, str, str, str]:
+def _answer_cells(pair: PairVerdict) -> tuple[str, str, str, str, str]:
     """A pair's final P and verdict, efficiency P and verdict, and the paper-accounting verdict
     (without the Holm mark: that question is not in the family)."""
-    words = BASELINE_WORDS if pair["role"] == verdicts.BEST_BASELINE else VERDICT_WORDS
-    final_p, final_v = answer_text(pair.get("final"), words)
-    efficiency_p, efficiency_v = answer_text(pair.get("efficiency"), words)
-    paper_v = answer_text(pair.get("efficiency_paper"), words)[1].rstrip(HOLM_MARK)
+    words = verdicts.words(pair.role, marked=True)
+    final_p, final_v = answer_text(pair.final, words)
+    efficiency_p, efficiency_v = answer_text(pair.efficiency, words)
+    paper_v = answer_text(pair.efficiency_paper, words)[1].rstrip(HOLM_MARK)
     return final_p, final_v, efficiency_p, efficiency_v, paper_v
 
 
 def verdict_table(
-    summary: dict,
+    summary: Summary,
     prefix: str = "",
     roles: Sequence[str] = (verdicts.ABLATION, verdicts.PLACEBO),
     methods: Sequence[str] | None = None,
@@ -345,21 +339,20 @@ def verdict_table(
         "| efficiency, paper's accounting | normalised final score, method / against |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for exp in summary["experiments"].values():
-        title = exp["spec"].get("title", exp["spec"]["name"])
-        for pair in exp.get("verdicts", []):
-            if pair["role"] not in roles or pair.get("parents") or not pair["method"].startswith(prefix):
+    for exp in summary.experiments.values():
+        title = exp.spec.get("title", exp.spec["name"])
+        for pair in exp.verdicts or ():
+            if pair.role not in roles or pair.parents or not pair.method.startswith(prefix):
                 continue
-            if methods is not None and pair["method"] not in methods:
+            if methods is not None and pair.method not in methods:
                 continue
-            if credited_only and not any(
-                (pair.get(q) or {}).get("verdict") == stats.CREDITED for q in verdicts.QUESTIONS
-            ):
+            answers = (pair.answer(q) for q in verdicts.QUESTIONS)
+            if credited_only and not any(a is not None and a.verdict == verdicts.CREDITED for a in answers):
                 continue
             final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
-            mine, theirs = (exp["methods"][m].get("final_iqm") for m in (pair["method"], pair["other"]))
+            mine, theirs = (exp.methods[m].final_iqm for m in (pair.method, pair.other))
             lines.append(
-                f"| {title} | `{pair['method']}` | `{pair['other']}` ({ROLE_WORDS[pair['role']]}) | {final_p} "
+                f"| {title} | `{pair.method}` | `{pair.other}` ({ROLE_WORDS[pair.role]}) | {final_p} "
                 f"| {final_v} | {efficiency_p} | {efficiency_v} | {paper_v} "
                 f"| {interval_text(mine)} / {interval_text(theirs)} |"
             )
@@ -379,7 +372,7 @@ def reproduced(to_threshold: dict[str, float | None]) -> str:
     return {2: "yes", 1: "partly"}.get(fewer, "no")
 
 
-def paper_table(summary: dict) -> str:
+def paper_table(summary: Summary) -> str:
     """The paper's own comparison first: per experiment the paper's claim and numbers, ours on the
     paper's protocol and accounting (the shared random-policy stream, apprentice samples only),
     ours counted (Algorithm 2's rollouts included), and whether the claim is reproduced."""
@@ -389,15 +382,17 @@ def paper_table(summary: dict) -> str:
         "| reproduced |",
         "|---|---|---|---|---|---|---|",
     ]
-    for exp in summary["experiments"].values():
-        spec = exp["spec"]
+    for exp in summary.experiments.values():
+        spec = exp.spec
         paper = spec.get("paper") or {}
         if not paper:
             continue  # a variant or sweep of ours: no claim of the paper's to compare
-        comparison = compare(exp, [m for m in PAPER_METHODS if m in exp["methods"]])
+        comparison = comparison_of(exp, [m for m in PAPER_METHODS if m in exp.methods])
         medians = {r.method: r.median_samples_paper for r in comparison.methods if comparison.meaningful}
         counted = comparison.result("ta-tl")
-        finals = " / ".join(interval_text((exp["methods"].get(m) or {}).get("final_iqm")) for m in PAPER_METHODS)
+        finals = " / ".join(
+            interval_text(exp.methods[m].final_iqm if m in exp.methods else None) for m in PAPER_METHODS
+        )
         lines.append(
             f"| {spec.get('title', spec['name'])} | {paper.get('section', '')} | {paper.get('numbers', '')} "
             f"| {' / '.join(samples_text(medians.get(m)) for m in PAPER_METHODS)} "

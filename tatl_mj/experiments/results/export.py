@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results import summary_data, verdicts
 from tatl_mj.experiments.results.records import RunDirectory, read_record, write_atomic
 
 FORMATS = ("csv",)
@@ -50,22 +50,22 @@ def rows(run_dir: str | Path) -> Iterator[dict[str, Any]]:
     reference returns) and its records, in that order."""
     run = RunDirectory(run_dir)
     try:
-        summary = read_record(run.summary)
+        summary = summary_data.read(run.summary)
     except FileNotFoundError:
         raise ExportError(f"{run.summary} not found: run `tatl run ... --out {run.root}` first") from None
-    preset = summary["preset"]
-    version = (summary.get("versions") or {}).get("tatl-mj")
-    for experiment, entry in summary["experiments"].items():
-        reference = entry["reference_return"]
-        random = dict(zip(entry["source_seeds"], entry["random_returns"]))
-        for method, data in entry["methods"].items():
-            for seed in data["seeds"]:
+    preset = summary.preset
+    version = summary.versions.get("tatl-mj")
+    for experiment, entry in summary.experiments.items():
+        reference = entry.reference_return
+        random = entry.random_by_seed or {}
+        for method, data in entry.methods.items():
+            for seed in data.seeds:
                 record = read_record(run.record_path(experiment, seed, method))
                 dynamics = " ".join(f"{task}={n}" for task, n in sorted(record["dynamics"].items()))
                 for point in record["curve"]:
                     score = None
                     if reference is not None and reference > random[seed]:  # else no normalised scores
-                        score = float(stats.normalised(np.array(point["mean_return"]), random[seed], reference))
+                        score = float(verdicts.normalised(np.array(point["mean_return"]), random[seed], reference))
                     yield {
                         "experiment": experiment,
                         "method": method,

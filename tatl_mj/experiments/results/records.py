@@ -190,6 +190,10 @@ def _summary_v2(summary: dict) -> dict:
                     "target_transitions": data["curve"].get(
                         "target_transitions", [list(data["curve"]["samples"])] * len(data["seeds"])
                     ),
+                    # Before rollouts were counted apart: none (the paper's accounting is the counted one).
+                    "rollout_transitions": data["curve"].get(
+                        "rollout_transitions", [[0] * len(data["curve"]["samples"])] * len(data["seeds"])
+                    ),
                 },
             }
             for m, data in methods.items()
@@ -198,6 +202,9 @@ def _summary_v2(summary: dict) -> dict:
     return {
         **summary,
         "kernels": summary.get("kernels") or {},
+        "verdict_rule_version": summary.get("verdict_rule_version", 1),  # before the field: rule 1
+        "threshold_fraction": summary.get("threshold_fraction", 0.95),
+        "reference_threshold": summary.get("reference_threshold", 0.9),
         "schema_version": 2,
         "experiments": experiments,
     }

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from tatl_mj.experiments.results import summary as summary_mod
+from tatl_mj.experiments.results import summary_data
 from tatl_mj.experiments.results.records import (
     SCHEMA_VERSION,
     SOURCE_UNIT,
@@ -158,18 +159,18 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
     """
     run = RunDirectory(run_dir)
     try:
-        summary = read_record(run.summary)
+        summary = summary_data.read(run.summary)
     except FileNotFoundError:
         raise ReferenceError(f"{run.root}: no summary.json; finish its `tatl run` first") from None
-    if summary.get("failures"):
+    if summary.failures:
         raise ReferenceError(
-            f"{run.root}: {len(summary['failures'])} units did not finish (summary.json's failures); "
+            f"{run.root}: {len(summary.failures)} units did not finish (summary.json's failures); "
             "rerun its command until none fail"
         )
-    preset, seeds = summary["preset"], list(summary["seeds"])
+    preset, seeds = summary.preset, list(summary.seeds)
     lines, experiments, kernels = [], {}, collections.Counter()
-    for experiment, entry in summary["experiments"].items():
-        methods = [m for m in summary["methods"] if m in entry["methods"]]  # the run's order, not the file's
+    for experiment, entry in summary.experiments.items():
+        methods = [m for m in summary.methods if m in entry.methods]  # the run's order, not the file's
         dynamics = set()
         for seed in seeds:
             for unit in [SOURCE_UNIT, *methods]:
@@ -183,11 +184,11 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
                 f"({sorted(dynamics)}); one is needed: rerun it with this tatl-mj in a new folder"
             )
         experiments[experiment] = {
-            "content_hash": content_hash(entry["spec"], preset),
+            "content_hash": content_hash(dict(entry.spec), preset),
             "dynamics": json.loads(dynamics.pop()),
             "methods": methods,
         }
-    specs = {e: _in_run_order(summary["experiments"][e]["spec"], summary["methods"]) for e in experiments}
+    specs = {e: _in_run_order(dict(summary.experiments[e].spec), summary.methods) for e in experiments}
     folder = root / name
     fragile = load(folder).manifest.fragile_verdicts if (folder / MANIFEST).is_file() else ()
     data = {
@@ -198,15 +199,15 @@ def build(run_dir: str | Path, name: str, command: str, root: Path = REFERENCE_R
         write_atomic(folder / file, blob)
     manifest = Manifest(
         name=name,
-        package_version=str(summary["versions"]["tatl-mj"]),
+        package_version=str(summary.versions["tatl-mj"]),
         schema_version=SCHEMA_VERSION,
-        verdict_rule_version=summary["verdict_rule_version"],  # the rule that judged the run
+        verdict_rule_version=summary.verdict_rule_version,  # the rule that judged the run
         preset=preset,
         seeds=tuple(seeds),
         command=command,
         experiments=experiments,
         kernels=dict(sorted(kernels.items())),
-        versions=summary["versions"],
+        versions=dict(summary.versions),
         records=len(lines),
         files={file: hashlib.sha256(blob).hexdigest() for file, blob in data.items()},
         fragile_verdicts=fragile,
