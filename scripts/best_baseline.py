@@ -1,6 +1,6 @@
 """Each experiment's best baseline per verdict question, from a run on the tuning seeds, as the
 ``best_baseline`` line its spec freezes (``verdicts.choose_best_baseline``: the baseline with
-the highest IQM of the question's per-seed statistic; ties to the one listed first).
+the highest IQM of the question's per-seed statistic; ties to the one the spec lists first).
 
     tatl run tasks/*.toml tasks/variants/*.toml --preset paper --seeds 5 --first-seed 0 --out runs/tuning
     python scripts/best_baseline.py runs/tuning/summary.json
@@ -11,12 +11,11 @@ from __future__ import annotations
 import json
 import sys
 
-from tatl_mj.experiments.results import verdicts
-from tatl_mj.transfer import roles
+from tatl_mj.experiments.results import pairs, verdicts
 
 if __name__ == "__main__":
     summary = json.load(open(sys.argv[1], encoding="utf-8"))
     for name, experiment in summary["experiments"].items():
-        chosen = verdicts.choose_best_baseline(experiment, roles.BASELINES)
+        chosen = verdicts.choose_best_baseline(experiment, pairs.baselines(experiment["spec"]["methods"]))
         table = ", ".join(f'{q} = "{b}"' for q, b in chosen.items())
         print(f"{name}: best_baseline = {{ {table} }}")

@@ -42,8 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from tatl_mj.experiments.results import pairs, verdicts
 from tatl_mj.experiments.results import statistics as stats
-from tatl_mj.experiments.results import verdicts
 from tatl_mj.experiments.results.records import SCHEMA_VERSION, UNKNOWN_KERNELS, RunDirectory, read_record
 
 THRESHOLD_FRACTION = 0.95  # of the gap to the best method: only without a declared reference
@@ -264,8 +264,8 @@ def ablation_verdict(comparison: Comparison, method: str, ablation: str) -> str 
 def ablation_sentences(experiment: dict, comparison: Comparison) -> list[str]:
     """:func:`ablation_verdict` for every ablation pair the experiment's spec declares (the
     judgement where there is no reference return to normalise by)."""
-    pairs = verdicts.ablation_pairs((experiment.get("spec") or {}).get("methods") or {})
-    return [v for v in (ablation_verdict(comparison, m, a) for m, a in pairs) if v]
+    declared = pairs.ablation_pairs((experiment.get("spec") or {}).get("methods") or {})
+    return [v for v in (ablation_verdict(comparison, m, a) for m, a in declared) if v]
 
 
 def _samples_text(value: float) -> str:
@@ -525,7 +525,7 @@ def _statistics(experiment: dict, spec: dict) -> None:
         per_seed[verdicts.FINAL][name], per_seed[verdicts.EFFICIENCY][name] = final, areas["counted"]
         paper[name] = areas["paper"]
     experiment["efficiency_range"] = [budgets[0], budgets[-1]]
-    experiment["families"] = verdicts.family_sizes(spec)
+    experiment["families"] = pairs.family_sizes(spec)
     experiment["verdicts"] = verdicts.judge(spec, per_seed, paper)
 
 
