@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import sys
 
-from tatl_mj.experiments.results import summary_data, verdicts
-from tatl_mj.transfer import roles
+from tatl_mj.experiments.results import pairs, summary_data, verdicts
 
 if __name__ == "__main__":
     summary = summary_data.read(sys.argv[1])
     for name, experiment in summary.experiments.items():
-        chosen = verdicts.choose_best_baseline(experiment.methods, roles.BASELINES)
+        chosen = verdicts.choose_best_baseline(experiment.methods, pairs.baselines(experiment.spec["methods"]))
         table = ", ".join(f'{q} = "{b}"' for q, b in chosen.items())
         print(f"{name}: best_baseline = {{ {table} }}")

@@ -64,3 +64,20 @@ class SourcePolicy:
 
     def learn(self, problem, target_samples):
         return problem.projected_source_policy()
+
+
+@dataclasses.dataclass(frozen=True)
+class UprightNoSource(ZeroTorque):
+    """Declares its roles as a built-in does: no source, and the source-free ablation of ``ta-tl``."""
+
+    name: str = "upright-no-source"
+    uses_source = False
+    ablation_of = ("ta-tl",)
+
+
+@dataclasses.dataclass(frozen=True)
+class ClaimsAblation(ZeroTorque):
+    """Declares itself ``ta-tl``'s source-free ablation without declaring that it uses no source."""
+
+    name: str = "claims-ablation"
+    ablation_of = ("ta-tl",)

@@ -13,13 +13,13 @@ from test_transfer_method import SourceQ  # Q_S(x, a) = a x_0 over actions -1, 0
 from tatl_mj import sampling
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results import pairs
 from tatl_mj.experiments.run import determinism, evaluation, method_unit, problems, sides, source_unit
-from tatl_mj.transfer import registry, roles
+from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import LinearFeatures
 from tatl_mj.transfer.fqi import LinearRegressor, fitted_q_iteration
 from tatl_mj.transfer.intertask_mapping import IdentityMapping
-from tatl_mj.transfer.method import TransferProblem
+from tatl_mj.transfer.method import TransferProblem, contract
 from tatl_mj.transfer.methods.model_based import ApprenticeFQI
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
 from tatl_mj.transitions import Transitions
@@ -285,9 +285,9 @@ def test_every_spec_lists_the_fair_baselines_and_ablations(path):
     # A fixed reference return in every preset, so no threshold depends on the methods listed.
     assert all(preset.reference_return is not None for preset in spec.presets.values())
     if spec.target.domain == "gridworld":
-        assert ("ta-tl", "replan-no-source") in verdicts.ablation_pairs(methods)
+        assert ("ta-tl", "replan-no-source") in pairs.ablation_pairs(methods)
         return
-    assert ("ta-tl", "apprentice-fqi") in verdicts.ablation_pairs(methods)
+    assert ("ta-tl", "apprentice-fqi") in pairs.ablation_pairs(methods)
     # The ablation fits ta-tl's own apprentice, and learns with the RL baseline's settings.
     assert methods["apprentice-fqi"]["apprentice"] == methods["ta-tl"]["apprentice"]
     for key, value in methods["rl"].items():
@@ -301,7 +301,8 @@ def test_new_methods_are_registered_and_source_free_where_they_say():
     for name in ("apprentice-fqi", "rl-reset", "rl-online", "uma-tl-reset", "uma-tl-prior"):
         assert registry.build(name).name == name
     assert registry.build("rl-online").data == "online" and registry.build("uma-tl-reset").data == "reset"
-    assert "apprentice-fqi" in roles.SOURCE_FREE and "uma-tl-prior" not in roles.SOURCE_FREE
+    assert not contract(registry.build("apprentice-fqi")).uses_source
+    assert contract(registry.build("uma-tl-prior")).uses_source
     with pytest.raises(ValueError, match=r"RL.data must be one of \['shared', 'reset', 'online'\], got 'replay'"):
         RL(data="replay")
 

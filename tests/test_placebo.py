@@ -7,7 +7,7 @@ import pytest
 from conftest import ROOT, TINY
 
 from tatl_mj.experiments import spec as spec_mod
-from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results import pairs
 from tatl_mj.experiments.run import determinism, method_unit, problems, source_unit
 from tatl_mj.transfer import registry
 from tatl_mj.transfer.features import make_features
@@ -71,7 +71,7 @@ def test_placebo_pairs_match_the_same_settings_but_the_source():
         "ta-tl-h-short": {"method": "ta-tl-h", "horizon": 5},
         "rl": {},
     }
-    assert verdicts.placebo_pairs(methods) == [("ta-tl", "ta-tl-placebo"), ("ta-tl-h", "ta-tl-h-placebo")]
+    assert pairs.placebo_pairs(methods) == [("ta-tl", "ta-tl-placebo"), ("ta-tl-h", "ta-tl-h-placebo")]
 
 
 def test_a_placebo_variant_runs_in_a_batch_on_its_own_source():

@@ -30,8 +30,9 @@ def _pair() -> tuple[spec_mod.ExperimentSpec, spec_mod.ExperimentSpec]:
 
 
 def test_source_free_built_ins_declare_it_and_transfer_methods_do_not():
-    free = {"rl", "apprentice-fqi", "rl-reset", "rl-online", "apprentice-upright"}
-    for name in free | {"ta-tl", "ta-tl-h", "uma-tl", "uma-tl-prior", "uma-tl-reset", "projected-source"}:
+    free = {"rl", "apprentice-fqi", "rl-reset", "rl-online", "apprentice-upright", "replan-no-source"}
+    using = {"ta-tl", "ta-tl-h", "uma-tl", "uma-tl-prior", "uma-tl-reset", "projected-source", "ta-tl-replan"}
+    for name in free | using:
         assert method.contract(registry.build(name)).uses_source is (name not in free), name
 
 
@@ -47,6 +48,18 @@ def test_a_method_without_a_source_is_handed_none():
         problem.projected_source_policy()(artifacts.target_stream.states[:1])
     record = method_unit.run_method(spec, preset, 0, "rl", artifacts)  # learns without reading them
     assert record["mapping_target_samples"] == 0 and len(record["curve"]) == 2
+
+    class Undeclared:
+        """Declares that it uses no source, then reads the source Q."""
+
+        name = "undeclared"
+        uses_source = False
+
+        def learn(self, problem, samples):
+            return problem.source_q.greedy
+
+    with pytest.raises(method.SourceWithheld, match="problem.source_q was read by a method that declares"):
+        method_unit.run_method(spec, preset, 0, "undeclared", artifacts, transfer=Undeclared())
 
 
 def test_shared_units_run_once_and_equal_the_variant_run_alone(tmp_path):

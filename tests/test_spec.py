@@ -263,6 +263,11 @@ def test_a_user_domain_and_method_by_import_path_load():
             "bad.toml: key 'methods.rl': method 'rl' is a built-in; your own method 'plugin_method:ZeroTorque' "
             "needs a table name of its own",
         ),
+        (
+            lambda t: t["methods"]["zero"].__setitem__("method", "plugin_method:ClaimsAblation"),
+            "bad.toml: key 'methods.zero': method 'zero' declares ablation_of ['ta-tl'] but uses the source: "
+            "a source-free ablation declares uses_source = False",
+        ),
     ],
     ids=[
         "domain-module",
@@ -275,6 +280,7 @@ def test_a_user_domain_and_method_by_import_path_load():
         "not-a-method",
         "method-setting",
         "method-built-in-name",
+        "method-roles",
     ],
 )
 def test_a_bad_import_path_is_one_line_naming_the_key(edit, message):

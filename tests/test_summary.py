@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from tatl_mj.experiments.results import comparison, notes, records, summary, verdicts
+from tatl_mj.experiments.results import comparison, notes, pairs, records, summary, verdicts
 from tatl_mj.experiments.results.summary_data import Experiment, Summary
 
 
@@ -126,14 +126,14 @@ def test_ablation_pairs_follow_built_ins_and_variants():
         "apprentice-upright": {},
         "rl": {},
     }
-    assert verdicts.ablation_pairs(methods) == [
+    assert pairs.ablation_pairs(methods) == [
         ("ta-tl-h", "apprentice-upright"),
         ("ta-tl-h-no-cart", "apprentice-upright"),
     ]
-    assert verdicts.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
+    assert pairs.ablation_pairs({"ta-tl-replan": {}, "rl": {}}) == []  # no ablation listed: nothing to say
     # A placebo variant is an ablation itself, judged against its trained method only.
     placebo = {"ta-tl-h-placebo": {"method": "ta-tl-h", "horizon": 20, "source": "placebo"}}
-    assert verdicts.ablation_pairs({**methods, **placebo}) == verdicts.ablation_pairs(methods)
+    assert pairs.ablation_pairs({**methods, **placebo}) == pairs.ablation_pairs(methods)
 
 
 def _with_counts(exp: dict) -> dict:

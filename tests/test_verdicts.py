@@ -13,7 +13,7 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
-from tatl_mj.experiments.results import verdicts
+from tatl_mj.experiments.results import pairs, verdicts
 from tatl_mj.experiments.results import verdicts as st
 from tatl_mj.experiments.results.summary_data import Curve, Interval, MethodSummary
 
@@ -206,12 +206,13 @@ def test_the_efficiency_area_is_exact_over_a_fixed_log_range():
         st.efficiency_area([[1]], [[1.0]], 100, 100)
 
 
-FLIPPED = {
+RBF = {"kind": "rbf", "centers": 9, "low": [-1.0, -1.0], "high": [1.0, 1.0], "sigma": [0.5, 0.5]}
+FLIPPED = {  # each table builds its method: the pairs are declared from the methods' roles
     "ta-tl": {},
     "ta-tl-placebo": {"method": "ta-tl", "source": "placebo"},
-    "ta-tl-rbf": {"method": "ta-tl", "apprentice": {"kind": "rbf"}, "ablation": "apprentice-fqi-rbf"},
+    "ta-tl-rbf": {"method": "ta-tl", "apprentice": RBF, "ablation": "apprentice-fqi-rbf"},
     "apprentice-fqi": {},
-    "apprentice-fqi-rbf": {"method": "apprentice-fqi", "apprentice": {"kind": "rbf"}},
+    "apprentice-fqi-rbf": {"method": "apprentice-fqi", "apprentice": RBF},
     "rl-reset": {},
     "uma-tl-reset": {},
 }
@@ -219,8 +220,7 @@ FLIPPED = {
 
 def test_pairs_and_families_are_declared_by_the_spec():
     spec = {"name": "flip", "methods": FLIPPED, "best_baseline": {"final": "rl-reset", "efficiency": "uma-tl-reset"}}
-    pairs = verdicts.declared_pairs(spec)
-    roles = {(p.method, p.other): (p.role, p.questions) for p in pairs}
+    roles = {(p.method, p.other): (p.role, p.questions) for p in pairs.declared_pairs(spec)}
     assert roles[("ta-tl", "apprentice-fqi")] == ("ablation", verdicts.QUESTIONS)
     # An explicit key overrides the built-in pairing (the RBF apprentice against its own ablation).
     assert roles[("ta-tl-rbf", "apprentice-fqi-rbf")] == ("ablation", verdicts.QUESTIONS)
@@ -232,7 +232,7 @@ def test_pairs_and_families_are_declared_by_the_spec():
     assert ("rl-reset", "uma-tl-reset") not in roles  # baselines are not compared with each other
     assert roles[("uma-tl-reset", "rl-reset")] == ("ablation", verdicts.QUESTIONS)  # the registry's pairing
     # 4 ablation and placebo pairs ask both; 5 non-baselines against each frozen baseline.
-    assert verdicts.family_sizes(spec) == {"final": 4 + 5, "efficiency": 4 + 5}
+    assert pairs.family_sizes(spec) == {"final": 4 + 5, "efficiency": 4 + 5}
     # The family does not depend on which methods a run holds.
     judged = verdicts.judge(spec, {q: {"ta-tl": np.ones(3), "apprentice-fqi": np.zeros(3)} for q in verdicts.QUESTIONS})
     assert [(v["method"], v["other"]) for v in judged] == [("ta-tl", "apprentice-fqi")]
@@ -240,12 +240,12 @@ def test_pairs_and_families_are_declared_by_the_spec():
 
 def test_a_variants_pairs_of_two_source_free_methods_are_its_parents():
     spec = {"name": "mc_energy", "streams": "mc", "methods": FLIPPED, "best_baseline": {"final": "rl-reset"}}
-    parents = [(p.method, p.other) for p in verdicts.declared_pairs(spec) if verdicts.parents_pair(spec, p)]
+    parents = [(p.method, p.other) for p in pairs.declared_pairs(spec) if pairs.parents_pair(spec, p)]
     assert sorted(parents) == [("apprentice-fqi", "rl-reset"), ("apprentice-fqi-rbf", "rl-reset")]
-    assert verdicts.family_sizes(spec)["final"] == 4 + 5 - 2
+    assert pairs.family_sizes(spec)["final"] == 4 + 5 - 2
     # A sweep's conditions share streams with their sweep, not records: nothing is the parent's.
     condition = {**spec, "condition": {"gain": 0.5}}
-    assert not any(verdicts.parents_pair(condition, p) for p in verdicts.declared_pairs(condition))
+    assert not any(pairs.parents_pair(condition, p) for p in pairs.declared_pairs(condition))
 
 
 def test_holm_is_reported_within_the_family_beside_the_unadjusted_verdict():

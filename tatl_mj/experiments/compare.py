@@ -20,7 +20,7 @@ the method: the pairs a verdict answers belong to the comparison, as a spec's ow
 pairs belong to the spec. They reach the verdict rule as a spec's own do: the
 spec the summary reads gains a method table for each user method, with the
 ``ablation`` and ``placebo`` keys a spec's tables declare pairs with
-(:func:`_summary_spec`; ``verdicts.declared_pairs`` reads them), so the user's
+(:func:`_summary_spec`; ``pairs.declared_pairs`` reads them), so the user's
 methods also meet the spec's frozen best baseline.
 
 Kernels: the user's units run with the reference's arithmetic kernels where this
@@ -352,7 +352,7 @@ def run(
 def _summary_spec(spec: ExperimentSpec, planned: Plan) -> dict:
     """The spec as the summary reads it, with a method table for each of the user's methods that
     carries its declared pairs (``roles.PAIR_KEYS``), so that the verdict rule pairs them as
-    it pairs the spec's own (``verdicts.declared_pairs``) and compares them with the spec's
+    it pairs the spec's own (``pairs.declared_pairs``) and compares them with the spec's
     frozen best baseline. The spec itself, as checked against the reference, is unchanged."""
     table = spec_to_dict(spec)
     methods = {**table["methods"], **{name: dict(table["methods"].get(name) or {}) for name in planned.methods}}

@@ -200,7 +200,17 @@ class TransferMethod(Protocol):
       simulator (the problem then withholds them: reading one raises
       :class:`SourceWithheld`), so experiments that share its target, data and
       random streams and differ only in their mapping get the same record, and
-      ``tatl run`` computes it once (default True);
+      ``tatl run`` computes it once, and the verdicts count it as source-free (default True);
+    - ``ablation_of``: the methods it is the source-free ablation of, each named as a
+      spec's table builds it (a built-in's name, or a plug-in's ``module:attribute``):
+      a transfer method built from one of them is judged against it where the spec
+      names no ``ablation`` of its own (default none; only a method with
+      ``uses_source`` False may declare any);
+    - ``baseline``: True for a comparison method (the reports compare every other
+      method with the experiment's best baseline; default False);
+    - ``privileged``: True for a method that uses what a robot in the target lacks:
+      simulator resets to chosen states, the target's reward function at states of its
+      choosing, or the target's true model (default False);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n);
     - on the returned policy, ``decide_together(policies)``: called on the first of
@@ -208,6 +218,10 @@ class TransferMethod(Protocol):
       :data:`JointDecisions` that gives each block's states exactly the actions its
       policy gives them alone, sharing work between them, or None where they cannot
       (:func:`joint_decisions` reads it; default: each policy is called on its own).
+
+    ``uses_source``, ``ablation_of``, ``baseline``, ``privileged`` and ``source`` are the
+    method's roles: the runner, the verdicts and the reports read them from the built
+    method (a role that depends on a setting is a property of the instance).
 
     A method class declares what each of its settings admits in a class-level table,
     ``constraints`` (``tatl_mj.validation``; the built-ins' in their modules): a spec's
@@ -232,17 +246,39 @@ class Contract:
     source: str = "trained"
     check: Callable[[TaskDescription, TaskDescription], None] | None = None
     uses_source: bool = True
+    ablation_of: tuple[str, ...] = ()
+    baseline: bool = False
+    privileged: bool = False
 
 
 def contract(method: Any) -> Contract:
-    """``method``'s optional hooks and attributes, defaults where it has none."""
-    return Contract(
+    """``method``'s optional hooks and attributes, defaults where it has none; ValueError
+    (one line) where its roles contradict each other."""
+    declared = Contract(
         uses_samples=bool(getattr(method, "uses_samples", True)),
         data=str(getattr(method, "data", "shared")),
         source=str(getattr(method, "source", "trained")),
         check=getattr(method, "check", None),
         uses_source=bool(getattr(method, "uses_source", True)),
+        ablation_of=_names(method, getattr(method, "ablation_of", ())),
+        baseline=bool(getattr(method, "baseline", False)),
+        privileged=bool(getattr(method, "privileged", False)),
     )
+    if declared.ablation_of and declared.uses_source:
+        # A win over an ablation that reads the source would not be a win of the source.
+        raise ValueError(
+            f"method {getattr(method, 'name', method)!r} declares ablation_of {list(declared.ablation_of)} "
+            "but uses the source: a source-free ablation declares uses_source = False"
+        )
+    return declared
+
+
+def _names(method: Any, value: Any) -> tuple[str, ...]:
+    if not isinstance(value, (tuple, list)) or not all(isinstance(v, str) for v in value):
+        raise ValueError(
+            f"method {getattr(method, 'name', method)!r}: ablation_of must be a tuple of method names, got {value!r}"
+        )
+    return tuple(value)
 
 
 class SourceWithheld(RuntimeError):

@@ -5,7 +5,7 @@ arguments (an experiment spec's ``[methods.NAME]`` table) and returns the method
 object. A plug-in method is any object with ``name`` and ``learn`` (see
 ``tatl_mj.transfer.method``); it needs no entry here: :func:`resolve` finds it by
 import path, ``"module:attribute"``, for the CLI, the spec loader and the runner
-alike. The methods' roles in the reports live apart, in ``tatl_mj.transfer.roles``.
+alike. Each method declares its own roles in the reports (``method.contract``).
 """
 
 from __future__ import annotations

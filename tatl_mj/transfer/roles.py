@@ -1,36 +1,13 @@
-"""What a method's name and its spec table say about it, without importing any method.
+"""The keys of a spec's ``[methods.NAME]`` table that are not settings, without importing any method.
 
-The roles the reports judge methods by (baselines, source-free ablations), and
-the keys of a spec's ``[methods.NAME]`` table that are not settings. Plain data:
-the experiments' reports read it without building a method, and
-``tatl_mj.transfer.registry`` (which imports every method class) builds them.
+Plain data: the spec loader, the registry and the reports read it. A method's roles (whether
+it uses the source, what it is the ablation of, whether it is a baseline or privileged) are
+not here: each method declares its own (``tatl_mj.transfer.method.contract``).
 """
 
 from __future__ import annotations
 
 from typing import Any
-
-SOURCE_FREE = ("rl", "rl-reset", "rl-online", "apprentice-fqi", "apprentice-upright", "replan-no-source")
-"""Methods that never look at the source: the ablations a transfer win is measured against."""
-
-ABLATION_OF: dict[str, tuple[str, ...]] = {
-    "ta-tl": ("apprentice-fqi", "replan-no-source"),
-    "ta-tl-h": ("apprentice-upright",),
-    "ta-tl-replan": ("replan-no-source",),
-    "ta-tl-replan-protocol": ("replan-no-source",),
-    "uma-tl": ("rl",),
-    "uma-tl-prior": ("rl",),
-    "uma-tl-reset": ("rl-reset",),
-}
-"""Transfer method -> the built-ins that are the same method without the source, in
-order of preference: the first a spec lists is the one a win must beat to be credited
-to transfer (``ta-tl``: the model-based learner on its own apprentice; on the grid,
-whose targets are cells, the planner on the tabular apprentice)."""
-
-BASELINES = ("uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset")
-"""The comparison methods (reports compare every other method with them); ``-reset``
-ones use privileged simulator resets."""
-
 
 VARIANT_KEY = "method"
 """A spec's ``[methods.NAME]`` table may name a built-in here (``method = "ta-tl-h"``):
@@ -41,7 +18,7 @@ such as ``ta-tl-h-no-cart``). Without it, NAME is the built-in itself. A value
 
 PAIR_KEYS = ("ablation", "placebo")
 """Keys of a spec's ``[methods.NAME]`` table that declare which method NAME is judged against
-(its source-free ablation, its placebo; ``tatl_mj.experiments.results.verdicts``): not settings."""
+(its source-free ablation, its placebo; ``tatl_mj.experiments.results.pairs``): not settings."""
 
 
 def base_of(name: str, settings: dict[str, Any] | None = None) -> str:
@@ -62,4 +39,4 @@ def plugin_path(settings: dict[str, Any] | None) -> str | None:
     return base if isinstance(base, str) and ":" in base else None
 
 
-__all__ = ["ABLATION_OF", "BASELINES", "PAIR_KEYS", "SOURCE_FREE", "VARIANT_KEY", "base_of", "plugin_path"]
+__all__ = ["PAIR_KEYS", "VARIANT_KEY", "base_of", "plugin_path"]

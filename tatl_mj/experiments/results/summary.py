@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.results import notes, verdicts
+from tatl_mj.experiments.results import notes, pairs, verdicts
 from tatl_mj.experiments.results import statistics as stats
 from tatl_mj.experiments.results.comparison import (
     REFERENCE_THRESHOLD,
@@ -180,7 +180,7 @@ def add_statistics(experiment: dict, spec: dict, seeds: list[int]) -> None:
         per_seed[verdicts.FINAL][name], per_seed[verdicts.EFFICIENCY][name] = scored.final, areas[verdicts.COUNTED]
         paper[name] = areas[verdicts.PAPER]
     experiment["efficiency_range"] = [budgets[0], budgets[-1]]
-    experiment["families"] = verdicts.family_sizes(spec)
+    experiment["families"] = pairs.family_sizes(spec)
     experiment["verdicts"] = verdicts.judge(spec, per_seed, paper)
 
 

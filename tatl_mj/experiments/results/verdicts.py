@@ -1,10 +1,10 @@
 """The verdict rule, whole and in one place, under :data:`VERDICT_RULE_VERSION` (docs/protocol.md,
 "Verdicts", declares it with its reasons).
 
-- Pairs, declared by the spec: a transfer method against its source-free **ablation**
-  (``ablation_pairs``), against itself on a **placebo** source (``placebo_pairs``), any method
-  that is not a baseline against the frozen **best baseline** (``best_baseline_pairs``,
-  ``choose_best_baseline`` on the tuning seeds).
+- Pairs, declared by the spec from the roles its methods declare
+  (``tatl_mj.experiments.results.pairs``): a transfer method against its source-free
+  **ablation**, against itself on a **placebo** source, any method that is not a baseline
+  against the frozen **best baseline** (``choose_best_baseline`` here, on the tuning seeds).
 - Per seed (paired: a seed's methods share its source policy, target samples and evaluation
   starts), on normalised scores (``normalised``), two questions (``scored``): **final**, the
   score at the largest budget; **efficiency**, the area over log counted transitions
@@ -28,17 +28,25 @@ import scipy.special
 import scipy.stats
 
 from tatl_mj.experiments.results import statistics as stats
+from tatl_mj.experiments.results.pairs import (
+    ABLATION,
+    BEST_BASELINE,
+    EFFICIENCY,
+    FINAL,
+    PLACEBO,
+    QUESTIONS,
+    ablation_pairs,
+    declared_pairs,
+    family_sizes,
+    parents_pair,
+)
 from tatl_mj.experiments.results.statistics import CONFIDENCE, Estimate
-from tatl_mj.transfer import roles
 
 VERDICT_RULE_VERSION = 2
 """Bumped whenever a change to this rule can move a verdict (written into summary.json).
 1: P(X > Y) over all pairs of seeds on the area alone (unpaired), best baseline picked on the
 reported seeds. 2: this module."""
 
-FINAL, EFFICIENCY = "final", "efficiency"
-QUESTIONS = (FINAL, EFFICIENCY)
-ABLATION, PLACEBO, BEST_BASELINE = "ablation", "placebo", "best baseline"
 SCORE_FLOOR = -1.0
 """Normalised scores below it count as it in the efficiency area: one blown-up fit (a score of
 -10^6) cannot decide a seed; -1 is as far below random as the reference is above it."""
@@ -69,121 +77,6 @@ class Comparison(Protocol):
     @property
     def meaningful(self) -> bool: ...
     def result(self, method: str) -> Compared | None: ...
-
-
-@dataclasses.dataclass(frozen=True)
-class Pair:
-    """One declared comparison: ``method`` against ``other`` in a ``role``, on ``questions``."""
-
-    method: str
-    other: str
-    role: str
-    questions: tuple[str, ...] = QUESTIONS
-
-
-def _base(name: str, settings: Mapping[str, Any] | None) -> str | None:
-    try:
-        return roles.base_of(name, dict(settings or {}))
-    except ValueError:
-        return None
-
-
-def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
-    """(transfer method, its source-free ablation) for every such pair a spec declares.
-
-    A table's ``ablation`` key names it; otherwise pairs go by built-in
-    (``roles.ABLATION_OF``), so a variant (``method = "ta-tl"``) pairs with the
-    ablation of its built-in: of the ablations a built-in names, the first the spec
-    lists (the built-in's own table, else each variant of it). A placebo is itself an
-    ablation, judged against its trained method only.
-    """
-    bases = {name: _base(name, settings) for name, settings in spec_methods.items()}
-    pairs = []
-    for name, b in bases.items():
-        settings = spec_methods.get(name) or {}
-        if settings.get("ablation"):
-            pairs.append((name, str(settings["ablation"])))
-            continue
-        if settings.get("source") == "placebo":
-            continue
-        for wanted in roles.ABLATION_OF.get(b or "", ()):
-            # The built-in itself where the spec lists it, else every variant of it.
-            found = [wanted] if wanted in bases else [other for other, ob in bases.items() if ob == wanted]
-            if found:
-                pairs.extend((name, other) for other in found)
-                break
-    return pairs
-
-
-def placebo_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
-    """(transfer method, the same method on a placebo source) for every such pair a spec declares:
-    a table's ``placebo`` key, else the table with ``source = "placebo"`` of the same built-in
-    whose settings are otherwise the same."""
-    ignored = (roles.VARIANT_KEY, "source", *roles.PAIR_KEYS)
-
-    def key(name: str) -> tuple[str, list] | None:
-        settings = dict(spec_methods.get(name) or {})
-        base = _base(name, settings)
-        if base is None:
-            return None
-        return base, sorted((k, repr(v)) for k, v in settings.items() if k not in ignored)
-
-    declared = [(n, str(s["placebo"])) for n, s in spec_methods.items() if (s or {}).get("placebo")]
-    placebos = [n for n, s in spec_methods.items() if (s or {}).get("source") == "placebo"]
-    trained = [
-        n
-        for n, s in spec_methods.items()
-        if (s or {}).get("source", "trained") == "trained" and not (s or {}).get("placebo")
-    ]
-    matched = [(t, p) for p in placebos for t in trained if key(t) is not None and key(t) == key(p)]
-    return declared + matched
-
-
-def best_baseline_pairs(spec_methods: Mapping[str, Any], best: Mapping[str, str]) -> list[Pair]:
-    """Every listed method that is not a baseline against the frozen best baseline, one pair per
-    baseline named (both questions when one baseline was chosen for both)."""
-    by_baseline: dict[str, list[str]] = {}
-    for question in QUESTIONS:
-        if best.get(question):
-            by_baseline.setdefault(best[question], []).append(question)
-    baselines = set(roles.BASELINES) | set(best.values())
-    pairs = []
-    for baseline, questions in by_baseline.items():
-        for name, settings in spec_methods.items():
-            if name in baselines or _base(name, settings) in roles.BASELINES:
-                continue
-            pairs.append(Pair(name, baseline, BEST_BASELINE, tuple(questions)))
-    return pairs
-
-
-def declared_pairs(spec: Mapping[str, Any]) -> list[Pair]:
-    """Every pair an experiment's spec declares, in table order: ablations, placebos, best baseline."""
-    methods = spec.get("methods") or {}
-    pairs = [Pair(m, a, ABLATION) for m, a in ablation_pairs(methods)]
-    pairs += [Pair(m, p, PLACEBO) for m, p in placebo_pairs(methods)]
-    return pairs + best_baseline_pairs(methods, spec.get("best_baseline") or {})
-
-
-def source_free(name: str, settings: Mapping[str, Any] | None) -> bool:
-    """Whether a spec's method reads no source (a built-in of ``roles.SOURCE_FREE``)."""
-    return _base(name, settings) in roles.SOURCE_FREE
-
-
-def parents_pair(spec: Mapping[str, Any], pair: Pair) -> bool:
-    """Whether ``pair`` is its parent's records: in a mapping variant (``streams`` names the
-    experiment it shares its draws with), both methods read no source, so both records are
-    the parent's and so is the verdict."""
-    streams = spec.get("streams")
-    if not streams or streams == spec.get("name") or spec.get("condition"):
-        return False
-    methods = spec.get("methods") or {}
-    return source_free(pair.method, methods.get(pair.method)) and source_free(pair.other, methods.get(pair.other))
-
-
-def family_sizes(spec: Mapping[str, Any]) -> dict[str, int]:
-    """Per question, how many pairs the spec declares for it (a variant's parent's pairs excluded)."""
-    pairs = [p for p in declared_pairs(spec) if not parents_pair(spec, p)]
-    return {q: sum(q in p.questions for p in pairs) for q in QUESTIONS}
 
 
 def normalised(returns: np.ndarray, random_return: np.ndarray | float, reference: float) -> np.ndarray:
@@ -571,29 +464,21 @@ __all__ = [
     "VERDICT_RULE_VERSION",
     "WORSE",
     "Answer",
-    "Pair",
     "PairedSigns",
     "Scored",
-    "ablation_pairs",
     "ablation_sentences",
     "ablation_verdict",
     "answer",
-    "best_baseline_pairs",
     "choose_best_baseline",
-    "declared_pairs",
     "efficiency_area",
-    "family_sizes",
     "holm",
     "judge",
     "median_difference",
     "normalised",
     "paired_signs",
-    "parents_pair",
-    "placebo_pairs",
     "scored",
     "sign_p_value",
     "sign_probability",
-    "source_free",
     "transitions",
     "verdict",
     "words",

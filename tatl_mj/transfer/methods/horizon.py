@@ -84,6 +84,17 @@ class HorizonTATL(TATL):
         """False for ``apprentice-upright`` (the zero reference reads no source at all)."""
         return self.reference == "source"
 
+    @property
+    def ablation_of(self) -> tuple[str, ...]:
+        """The zero reference is ``ta-tl-h``'s ablation: the same controller and apprentice without the source."""
+        return () if self.uses_source else ("ta-tl-h",)
+
+    @property
+    def privileged(self) -> bool:
+        """True for ``model = "oracle"``: it steps the real target simulator from a chosen state
+        (the zero state) to linearise it, which a robot cannot."""
+        return self.model == "oracle"
+
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)
         owner = type(self).__name__

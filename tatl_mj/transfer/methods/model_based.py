@@ -44,6 +44,10 @@ class ApprenticeFQI(TargetFQI):
     apprentice_ridge: float = 0.0
     model_samples: int = 20000
     name: str = "apprentice-fqi"
+    ablation_of = ("ta-tl",)  # ta-tl's own apprentice, without the source
+    # It scores model transitions from states spread over the target's reset box with the
+    # target's own reward function (problem.target_reward): states a robot does not choose.
+    privileged = True
 
     constraints: ClassVar[Constraints] = {
         **TargetFQI.constraints,

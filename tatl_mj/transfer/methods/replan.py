@@ -204,12 +204,29 @@ class ReplanTATL:
     def __post_init__(self) -> None:
         check_settings(self)
 
+    @property
+    def uses_source(self) -> bool:
+        """False for ``replan-no-source`` on the shared stream: it plans on the apprentice alone."""
+        return self.source_prior or self.data == "source-policy"
+
+    @property
+    def ablation_of(self) -> tuple[str, ...]:
+        """Without the source: the ablation of the planners on the tabular apprentice, and of
+        ``ta-tl`` on a target whose states are cells (the grid)."""
+        return () if self.uses_source else ("ta-tl", "ta-tl-replan", "ta-tl-replan-protocol")
+
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         owner = type(self).__name__
         if not target.discrete:
             raise ValueError(f"{owner} plans over cells: the target must take action indices")
         if source.known_model is None:
             raise ValueError(f"{owner} plans on the source's known model; {source.domain}/{source.task} has none")
+        if not self.uses_source and target.known_model is None:
+            # Its cells would come from the source's, through the mapping, which it does not read.
+            raise ValueError(
+                f"{owner}(source_prior=False) reads no source: it needs the target's cells (a known model); "
+                f"{target.domain}/{target.task} has none"
+            )
 
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> ReplanPolicy:
         self.check(problem.source, problem.target)
@@ -242,6 +259,7 @@ class OneStepOracle:
 
     name: str = "ta-tl-oracle"
     uses_samples = False
+    privileged = True  # it reads the target's true model, which a robot has no access to
     constraints: ClassVar[Constraints] = {}  # no settings
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:

@@ -144,6 +144,11 @@ class TargetFQI:
         return self.source_use != "none"
 
     @property
+    def privileged(self) -> bool:
+        """True on the ``reset`` protocol: a simulator reset to chosen states, which a robot lacks."""
+        return self.data == "reset"
+
+    @property
     def linear_features(self) -> dict:
         return {"kind": "linear"} if self.features is None else self.features
 
@@ -293,6 +298,7 @@ class UMATL(TargetFQI):
 
     name: str = "uma-tl"
     source_use = "initial"
+    baseline = True  # the paper's transfer baseline
 
 
 @dataclasses.dataclass(frozen=True)
@@ -309,6 +315,13 @@ class RL(TargetFQI):
     """No transfer: target FQI from scratch."""
 
     name: str = "rl"
+    baseline = True  # the paper's baseline without transfer
+
+    @property
+    def ablation_of(self) -> tuple[str, ...]:
+        """The UMA-TL learners on the same data protocol: the same FQI without the mapped source Q
+        (none on the online protocol, which no UMA-TL learner uses)."""
+        return {"shared": ("uma-tl", "uma-tl-prior"), "reset": ("uma-tl-reset",)}.get(self.data, ())
 
 
 __all__ = [
