@@ -149,9 +149,9 @@ def _report(args: argparse.Namespace, summary: dict, failed: Any) -> int:
         records.write_json(path, physics)
     print(costs.format_physics(physics))
     print(f"wrote {Path(args.out) / 'summary.json'} ({summary['wall_s']:.1f} s wall)")
-    from tatl_mj.experiments.results import summary as summary_mod
+    from tatl_mj.experiments.results import notes, summary_data
 
-    for line in summary_mod.notes(summary):
+    for line in notes.notes(summary_data.Summary.from_json(summary)):
         print(line)
     if failed is not None:  # one line; each unit's is in summary.json's "failures" and its traceback file
         print(f"tatl run: {failed}", file=sys.stderr)
