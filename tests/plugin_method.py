@@ -64,3 +64,14 @@ class SourcePolicy:
 
     def learn(self, problem, target_samples):
         return problem.projected_source_policy()
+
+
+@dataclasses.dataclass(frozen=True)
+class WrongShape:
+    """A policy that answers three values per state, whatever the target takes: refused by the
+    rehearsal before any source work."""
+
+    name: str = "wrong-shape"
+
+    def learn(self, problem, target_samples):
+        return lambda states: np.zeros((len(states), 3))
