@@ -109,7 +109,7 @@ def _checked_run(args: argparse.Namespace) -> tuple[list, range, dict | None] | 
     if isinstance(seeds, str):
         return seeds
     try:
-        methods = _methods(args.methods)
+        methods = _methods(args.methods, specs)
     except ValueError as error:
         return f"--methods: {error}"
     return specs, seeds, methods
@@ -226,25 +226,15 @@ def _seeds(args: argparse.Namespace, specs: list) -> range | str:
     return range(chosen["first_seed"], chosen["first_seed"] + chosen["seeds"])
 
 
-def _methods(text: str | None) -> dict | None:
-    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method object, or None for a built-in}.
-
-    Built-ins run with the spec's settings for them; ``module:attr`` entries are
-    imported, ``attr`` being a class (instantiated without arguments) or an
-    instance whose ``name`` names it in the results. None (no --methods): each
-    spec's own ``[methods]``.
-    """
+def _methods(text: str | None, specs: list = ()) -> dict | None:
+    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method object, or None for a built-in or a
+    method the specs list}; None (no --methods): each spec's own ``[methods]``. ValueError in
+    one line (``registry.parse_methods``)."""
     from tatl_mj.transfer import registry
 
     if text is None:
         return None
-    methods: dict = {}
-    for entry in filter(None, (e.strip() for e in text.split(","))):
-        if ":" not in entry:
-            methods[entry] = None  # a built-in or a spec's variant: the runner checks it against each spec
-            continue
-        obj = registry.resolve(entry)
-        methods[obj.name] = obj
+    methods = registry.parse_methods(text, [m for s in specs for m in s.methods])
     if not methods:
         raise ValueError("no methods given")
     return methods
@@ -276,10 +266,11 @@ def _plot(args: argparse.Namespace) -> int:
 def _compare(args: argparse.Namespace) -> int:
     """``tatl compare``: checks everything first (one line and exit 2 if it cannot run), then runs
     the user's units and writes the tables, or with ``--check`` reruns one reference unit."""
-    from tatl_mj.experiments import compare
+    from tatl_mj.experiments import compare, compare_settings
     from tatl_mj.experiments import spec as spec_mod
     from tatl_mj.experiments.results import records, reference
     from tatl_mj.experiments.run import runner
+    from tatl_mj.transfer import registry
 
     try:
         ref = reference.load(args.reference)
@@ -291,13 +282,16 @@ def _compare(args: argparse.Namespace) -> int:
             raise compare.CompareError(problem)
         entries = [] if args.check is not None else [e.strip() for e in args.methods.split(",") if e.strip()]
         renamed = dict(_pair("methods", e) for e in entries if "=" in e)  # a built-in under a new name
-        rest = [e for e in entries if "=" not in e]
         try:
-            methods = _methods(",".join(rest)) or {} if rest else {}
+            listed = [m for s in specs for m in s.methods]
+            methods = registry.parse_methods(",".join(entries), listed, renames=True)
         except ValueError as error:
             raise compare.CompareError(f"--methods: {error}") from None
         pairs = {kind: [_pair(kind, text) for text in getattr(args, kind) or ()] for kind in compare.PAIR_KINDS}
-        plan = compare.plan(ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds)
+        settings = compare_settings.read(args.settings) if args.settings else None
+        plan = compare.plan(
+            ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds, settings=settings
+        )
         unit = _unit(args.check) if args.check else None
     except (ValueError, FileNotFoundError) as error:  # CompareError, ReferenceError, SpecError, a plug-in's
         print(f"tatl compare: {error}", file=sys.stderr)
@@ -320,6 +314,7 @@ def _compare(args: argparse.Namespace) -> int:
         return 2
     for path in outcome.paths:
         print(f"wrote {path}")
+    print(outcome.resolution)
     if outcome.kernels_note:
         print(outcome.kernels_note)
     return 0
@@ -391,7 +386,7 @@ def _export(args: argparse.Namespace) -> int:
     from tatl_mj.experiments.results import export, records
 
     try:
-        path = export.export(args.dir, args.out, args.format)
+        path = export.export(args.dir, args.out, args.format, final=args.final)
     except (export.ExportError, records.RecordError) as error:
         print(f"tatl export: {error}", file=sys.stderr)
         return 2
@@ -503,7 +498,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="a run's records as one tidy table (CSV)")
     p.add_argument("dir", help="a `tatl run` output folder (its --out)")
     p.add_argument("--format", choices=("csv",), default="csv", help="csv (Parquet would need pyarrow or pandas)")
-    p.add_argument("--out", default=None, help="the table's path (default: DIR/export.csv)")
+    p.add_argument("--out", default=None, help="the table's path (default: DIR/export.csv, DIR/export-final.csv)")
+    p.add_argument("--final", action="store_true", help="one row per method, seed and experiment: its largest budget's")
     p.set_defaults(func=_export)
 
     p = sub.add_parser("render", help="render a clip of a method's policy on the target task")
@@ -539,9 +535,15 @@ def _compare_parser(sub: Any) -> None:
     p.add_argument("--out", type=_non_empty, default=None, help="output folder; rerunning resumes it")
     p.add_argument(
         "--reference",
-        default="paper-heldout",
-        help="a reference set's name (`tatl reference list`) or folder (default: paper-heldout; "
-        "tune on paper-tuning, seeds 0-4)",
+        default="paper-tuning",
+        help="a reference set's name (`tatl reference list`) or folder (default: paper-tuning, the tuning "
+        "seeds; compare on paper-heldout once your settings are frozen)",
+    )
+    p.add_argument(
+        "--settings",
+        default=None,
+        metavar="FILE.toml",
+        help="your plug-ins' settings per experiment: [METHOD.EXPERIMENT] tables of constructor arguments",
     )
     for kind in ("ablation", "placebo"):
         p.add_argument(

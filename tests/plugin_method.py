@@ -81,3 +81,13 @@ class ClaimsAblation(ZeroTorque):
 
     name: str = "claims-ablation"
     ablation_of = ("ta-tl",)
+
+
+class WrongShape:
+    """A policy that answers three values per state, whatever the target takes: refused by the
+    rehearsal before any source work."""
+
+    name: str = "wrong-shape"
+
+    def learn(self, problem, target_samples):
+        return lambda states: np.zeros((len(states), 3))

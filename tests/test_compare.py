@@ -2,6 +2,7 @@
 pairs, a built-in run under another name reproducing its reference records, and --check."""
 
 import dataclasses
+import hashlib
 import json
 import shutil
 
@@ -58,6 +59,16 @@ def test_a_plugin_with_its_declared_ablation_is_credited_against_it(compared, ti
     results = (out / "results.md").read_text()
     assert results.startswith("Your methods (`source-policy`, `zero`) against reference set `tiny` (preset `tiny`")
     assert "Your pairs: `source-policy` against `zero` (ablation)." in results
+    # What two seeds can resolve, then the user's own verdicts, before the reference's tables.
+    assert "On 2 seeds no pair can be credited or found worse, however clear: even 2 of 2 seeds better" in results
+    mine = results[results.index("## Your verdicts") : results.index("## Your verdicts") + 3000]
+    assert "| tiny_flip | `source-policy` | `zero` (ablation) | " in mine
+    assert "| tiny_flip | `source-policy` | `uma-tl` (best baseline) | " in mine
+    assert "| tiny_flip | `source-policy` | `ta-tl` (the built-in TA-TL, outside the rule) | " in mine
+    assert "| tiny_flip | `zero` | `ta-tl` (the built-in TA-TL, outside the rule) | " in mine
+    assert results.index("## Your verdicts") < results.index("| `source-policy` | `zero` (source-free) |")
+    claimed = records.read_json(out / "compare.json")
+    assert claimed["settings"] is None and claimed["kernels"] is None
     assert "| `source-policy` | `zero` (source-free) |" in results
     # Every reference method beside the user's, their records copied from the set.
     assert set(experiment["methods"]) == {
@@ -139,8 +150,9 @@ def test_a_spec_whose_content_differs_is_refused_in_one_line_before_any_work(tin
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr == (
         f"tatl compare: {changed}: the content of 'tiny_flip' differs from the spec reference 'tiny' was made from "
-        f"(content hash {mine[:12]} against {theirs[:12]}): compare the spec as tatl-mj 0.1.0 ships it, or make a "
-        "reference of your own from a run of yours (`tatl reference build`)\n"
+        f"at methods.ta-tl.zeta (yours 0.2, the reference's 0.1) (content hash {mine[:12]} against {theirs[:12]}): "
+        "compare the spec as tatl-mj 0.1.0 ships it, or make a reference of your own from a run of yours "
+        "(`tatl reference build`)\n"
     )
     assert not out.exists()
     # A reformatted copy of the same spec is accepted (its hash is its content's).
@@ -245,9 +257,15 @@ def test_kernels_other_than_the_references_are_said_once_with_the_fragile_verdic
     plan = compare.plan(dataclasses.replace(built, manifest=manifest), [spec_mod.load_spec(path)], _user_methods())
     here = next(iter(built.manifest.kernels))
     assert compare.kernels_note(plan, {here: 4}, None) is None
-    note = compare.kernels_note(plan, {"openblas 0.3.1 Haswell; numpy baseline": 4}, None)
-    assert note == (
-        "note: your units were computed with the arithmetic kernels ['openblas 0.3.1 Haswell; numpy baseline'], "
+    assert compare.kernels_detail(plan, {here: 4}, None) is None
+    other = {"openblas 0.3.1 Haswell; numpy baseline": 4}
+    # One short line for the terminal and results.md; the long form goes to compare.json.
+    assert compare.kernels_note(plan, other, None) == (
+        "note: other arithmetic kernels than reference 'tiny''s; per-seed returns can differ (1 verdict marked as "
+        "moving with them; compare.json has the details)"
+    )
+    assert compare.kernels_detail(plan, other, None) == (
+        "your units were computed with the arithmetic kernels ['openblas 0.3.1 Haswell; numpy baseline'], "
         f"reference 'tiny''s with [{here!r}]: per-seed returns can differ, and these verdicts are known to move "
         "with the kernels: tiny_flip: ta-tl vs uma-tl"
     )
@@ -273,10 +291,128 @@ def test_the_compare_command_resumes_a_comparison_and_names_what_it_wrote(compar
         "--out", str(again),
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[-1] == f"wrote {again / 'results.md'}"
+    assert done.stdout.splitlines()[-2] == f"wrote {again / 'results.md'}"
+    assert done.stdout.splitlines()[-1].startswith("On 2 seeds no pair can be credited or found worse")
     assert (again / "results.md").read_text() == (out / "results.md").read_text()
     bad = _cli(
         str(path), "--reference", str(built.folder), "--methods", methods, "--ablation", "zero", "--out", str(again)
     )
     assert bad.returncode == 2
     assert bad.stderr == "tatl compare: --ablation zero: expected YOURS=ABLATION, e.g. mine=mine-no-source\n"
+
+
+def test_the_users_table_answers_each_pair_and_flags_one_near_random():
+    from tatl_mj.experiments import compare_report
+
+    def method(finals, efficiency):
+        return {"seeds": [0, 1, 2], "normalised": [[0.0, f] for f in finals], "efficiency": {"per_seed": efficiency}}
+
+    experiment = {
+        "compared_seeds": [0, 1, 2],
+        "methods": {
+            "mine": method([0.05, 0.02, 0.08], [0.01, 0.02, 0.03]),
+            "mine-no-source": method([0.01, 0.0, 0.03], [0.0, 0.0, 0.01]),
+            "ta-tl": method([0.9, 0.8, 0.95], [0.5, 0.6, 0.7]),
+        },
+        "verdicts": [],
+    }
+    answer = {"seeds": {"better": 3, "tied": 0, "worse": 0}, "median_difference": {"value": 0.04}}
+    experiment["verdicts"] = [
+        {"method": "mine", "other": "mine-no-source", "role": "ablation", "final": {**answer, "verdict": "credited"}}
+    ]
+    rows = compare_report.rows({"experiments": {"e": experiment}}, ["mine"])
+    assert [(r["other"], r["near_random"]) for r in rows] == [("mine-no-source", True), ("ta-tl", False)]
+    # The TA-TL pair is answered as the rule answers a pair: 3 of 3 seeds worse.
+    assert rows[1]["final"]["seeds"] == {"better": 0, "tied": 0, "worse": 3}
+    table = "\n".join(compare_report.table({"experiments": {"e": experiment}}, ["mine"]))
+    assert (
+        "| e | `mine` | `mine-no-source` (ablation) | credited: 3 of 3 seeds better, median difference +0.04 | "
+        "not asked | both near random (median final score < 0.1) |"
+    ) in table
+    assert compare_report.resolution(10) == (
+        "On 10 seeds a pair is credited (or found worse) only when at least 9 of the 10 seeds agree: the exact "
+        "sign test's 95% interval then lies clear of 0.5."
+    )
+    assert compare_report.resolution(5).startswith(
+        "On 5 seeds no pair can be credited or found worse, however clear: even 5 of 5 seeds better gives the exact "
+        "sign test's 95% interval [0.48, 1.00], which holds 0.5 (it takes at least 6 seeds)"
+    )
+
+
+def _settings(tmp_path, text):
+    from tatl_mj.experiments import compare_settings
+
+    path = tmp_path / "mine.toml"
+    path.write_text(text)
+    return compare_settings.read(path)
+
+
+def test_a_settings_file_gives_a_plugin_settings_per_experiment_checked_before_any_work(tiny_reference, tmp_path):
+    _user_methods()  # puts tests/ on the path
+    import plugin_method
+
+    path, _, built = tiny_reference
+    spec = spec_mod.load_spec(path)
+    fixed = plugin_method.FixedAction()
+    settings = _settings(tmp_path, "[fixed.tiny_flip]\nindex = 0\n")
+    plan = compare.plan(built, [spec], {"fixed": fixed}, settings=settings)
+    assert plan.methods["fixed"] == {EXPERIMENT: plugin_method.FixedAction(index=0)}
+    assert plan.settings_used == {"fixed": {EXPERIMENT: {"index": 0}}}
+    # The spec's content, and so its hash, is untouched: the reference accepted it above.
+    refusals = {
+        "[fixd.tiny_flip]\nindex = 0\n": "[fixd] names none of your plug-ins (['fixed'])",
+        "[fixed.tiny_flop]\nindex = 0\n": "[fixed.tiny_flop] names no experiment of this comparison (its "
+        "experiments: ['tiny_flip'])",
+        "[fixed.tiny_flip]\nindex = -1\n": "[fixed.tiny_flip]: FixedAction.index must be ",
+        "[fixed.tiny_flip]\nindx = 1\n": "[fixed.tiny_flip]: FixedAction(**settings) failed: ",
+        "[fixed]\nindex = 1\n": "fixed.index is not in a table of one experiment; write [fixed.EXPERIMENT]",
+    }
+    for text, expected in refusals.items():
+        with pytest.raises(ValueError) as caught:
+            compare.plan(built, [spec], {"fixed": fixed}, settings=_settings(tmp_path, text))
+        assert str(caught.value).startswith(f"--settings {tmp_path / 'mine.toml'}: {expected}"), str(caught.value)
+        assert "\n" not in str(caught.value)
+
+
+def test_the_settings_file_is_copied_and_hashed_with_the_comparison(tiny_reference, tmp_path):
+    path, _, built = tiny_reference
+    settings = tmp_path / "mine.toml"
+    settings.write_text("[fixed.tiny_flip]\nindex = 0\n")
+    out = tmp_path / "out"
+    done = _cli(
+        str(path), "--reference", str(built.folder), "--methods", "plugin_method:FixedAction",
+        "--settings", str(settings), "--out", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    claimed = records.read_json(out / "compare.json")
+    assert claimed["settings"] == {
+        "file": "settings.toml",
+        "sha256": hashlib.sha256(settings.read_bytes()).hexdigest(),
+        "applied": {"fixed": {EXPERIMENT: {"index": 0}}},
+    }
+    assert (out / "settings.toml").read_bytes() == settings.read_bytes()
+    assert "On 2 seeds no pair can be credited" in done.stdout
+    # Other settings into the same folder would leave its records behind them: refused.
+    settings.write_text("[fixed.tiny_flip]\nindex = 1\n")
+    again = _cli(
+        str(path), "--reference", str(built.folder), "--methods", "plugin_method:FixedAction",
+        "--settings", str(settings), "--out", str(out),
+    )  # fmt: skip
+    assert again.returncode == 2 and "holds a comparison made with other --settings" in again.stderr
+
+
+def test_a_policy_of_the_wrong_shape_is_refused_before_any_source_work(tiny_reference, tmp_path):
+    path, _, built = tiny_reference
+    out = tmp_path / "out"
+    done = _cli(str(path), "--reference", str(built.folder), "--methods", "plugin_method:WrongShape", "--out", str(out))
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == (
+        "tatl compare: --methods: method 'wrong-shape': its policy, learned on a tiny problem of tiny_flip and called "
+        "on 5 target states, returned shape (5, 3); pendulum/swingup_flipped takes (n, 1) finite action values or "
+        "(n,)\n"
+    )
+    assert not out.exists()
+    run = tatl("run", str(path), "--preset", "tiny", "--methods", "plugin_method:WrongShape", "--out", str(out),
+               env=PLUGINS)  # fmt: skip
+    assert run.returncode == 2 and run.stderr == done.stderr.replace("tatl compare:", "tatl run:")
+    assert not out.exists()

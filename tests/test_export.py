@@ -53,3 +53,20 @@ def test_the_export_command_writes_csv_and_refuses_other_formats(tiny_reference,
         f"tatl export: {tmp_path / 'nothing' / 'summary.json'} not found: run `tatl run ... --out "
         f"{tmp_path / 'nothing'}` first\n"
     )
+
+
+def test_the_final_export_holds_one_row_per_method_seed_and_experiment_at_its_largest_budget(tiny_reference, tmp_path):
+    _, run, _ = tiny_reference
+    done = tatl("export", str(run), "--final")
+    assert done.returncode == 0, done.stderr
+    path = run / "export-final.csv"
+    assert done.stdout == f"wrote {path}\n"
+    with path.open(newline="") as handle:
+        final = list(csv.DictReader(handle))
+    with export.export(run, tmp_path / "all.csv").open(newline="") as handle:
+        every = list(csv.DictReader(handle))
+    keys = [(r["experiment"], r["method"], r["seed"]) for r in final]
+    assert len(keys) == len(set(keys)) == len({(r["experiment"], r["method"], r["seed"]) for r in every})
+    assert {r["budget"] for r in final} == {"120"}  # the tiny preset's largest
+    assert final == [r for r in every if r["budget"] == "120"]
+    path.unlink()

@@ -110,3 +110,16 @@ def test_the_across_experiments_interval_does_not_depend_on_the_specs_order():
     reordered = summary.aggregate(dict(reversed(list(experiments.items()))))["rl"]
     assert (given["low"], given["high"]) == (reordered["low"], reordered["high"])
     assert given["low"] < given["value"] < given["high"]
+
+
+def test_seeds_to_credit_is_what_the_exact_sign_test_can_resolve():
+    # Five seeds cannot credit at all: 5 of 5 gives [0.48, 1.00], which holds 0.5.
+    five = verdicts.sign_probability(verdicts.PairedSigns(5, 0, 0))
+    assert (round(five.low, 2), five.high) == (0.48, 1.0)
+    assert verdicts.seeds_to_credit(5) is None
+    assert verdicts.seeds_to_credit(6) == 6  # 6 of 6: [0.54, 1.00]
+    assert verdicts.seeds_to_credit(10) == 9  # 9 of 10: [0.555, 0.997]; 8 of 10 holds 0.5
+    assert verdicts.verdict(verdicts.sign_probability(verdicts.PairedSigns(9, 0, 1))) == verdicts.CREDITED
+    assert verdicts.verdict(verdicts.sign_probability(verdicts.PairedSigns(8, 0, 2))) == verdicts.NOT_CREDITED
+    assert verdicts.verdict(verdicts.sign_probability(verdicts.PairedSigns(1, 0, 9))) == verdicts.WORSE
+    assert verdicts.seeds_to_credit(1) is None

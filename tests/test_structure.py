@@ -32,7 +32,8 @@ LAYERS = (
     ("tatl_mj.experiments.results",),
     ("tatl_mj.experiments.run",),
     ("tatl_mj.experiments.report",),
-    ("tatl_mj.experiments.compare",),
+    # A comparison, what its results open with, and a user's settings file for it.
+    ("tatl_mj.experiments.compare", "tatl_mj.experiments.compare_report", "tatl_mj.experiments.compare_settings"),
     # Entry points: commands, the Gymnasium registration, its vector env and the SB3 adapter.
     ("tatl_mj.cli", "tatl_mj.bench", "tatl_mj.gym", "tatl_mj.vector", "tatl_mj.vector_contexts", "tatl_mj.sb3"),
 )

@@ -20,9 +20,15 @@ def add_compare(sub: Any) -> None:
     p.add_argument("--out", type=options.non_empty, default=None, help="output folder; rerunning resumes it")
     p.add_argument(
         "--reference",
-        default="paper-heldout",
-        help="a reference set's name (`tatl reference list`) or folder (default: paper-heldout; "
-        "tune on paper-tuning, seeds 0-4)",
+        default="paper-tuning",
+        help="a reference set's name (`tatl reference list`) or folder (default: paper-tuning, the tuning "
+        "seeds; compare on paper-heldout once your settings are frozen)",
+    )
+    p.add_argument(
+        "--settings",
+        default=None,
+        metavar="FILE.toml",
+        help="your plug-ins' settings per experiment: [METHOD.EXPERIMENT] tables of constructor arguments",
     )
     for kind in ("ablation", "placebo"):
         p.add_argument(
@@ -51,10 +57,11 @@ def add_compare(sub: Any) -> None:
 def _compare(args: argparse.Namespace) -> int:
     """``tatl compare``: checks everything first (one line and exit 2 if it cannot run), then runs
     the user's units and writes the tables, or with ``--check`` reruns one reference unit."""
-    from tatl_mj.experiments import compare
+    from tatl_mj.experiments import compare, compare_settings
     from tatl_mj.experiments import spec as spec_mod
     from tatl_mj.experiments.results import records, reference
     from tatl_mj.experiments.run import runner
+    from tatl_mj.transfer import registry
 
     try:
         ref = reference.load(args.reference)
@@ -66,13 +73,16 @@ def _compare(args: argparse.Namespace) -> int:
             raise compare.CompareError(problem)
         entries = [] if args.check is not None else [e.strip() for e in args.methods.split(",") if e.strip()]
         renamed = dict(_pair("methods", e) for e in entries if "=" in e)  # a built-in under a new name
-        rest = [e for e in entries if "=" not in e]
         try:
-            methods = options.parse_methods(",".join(rest)) or {} if rest else {}
+            listed = [m for s in specs for m in s.methods]
+            methods = registry.parse_methods(",".join(entries), listed, renames=True)
         except ValueError as error:
             raise compare.CompareError(f"--methods: {error}") from None
         pairs = {kind: [_pair(kind, text) for text in getattr(args, kind) or ()] for kind in compare.PAIR_KINDS}
-        plan = compare.plan(ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds)
+        settings = compare_settings.read(args.settings) if args.settings else None
+        plan = compare.plan(
+            ref, specs, methods, renamed=renamed, pairs=pairs, preset=args.preset, seeds=seeds, settings=settings
+        )
         unit = _unit(args.check) if args.check else None
     except (ValueError, FileNotFoundError) as error:  # CompareError, ReferenceError, SpecError, a plug-in's
         print(f"tatl compare: {error}", file=sys.stderr)
@@ -95,6 +105,7 @@ def _compare(args: argparse.Namespace) -> int:
         return 2
     for path in outcome.paths:
         print(f"wrote {path}")
+    print(outcome.resolution)
     if outcome.kernels_note:
         print(outcome.kernels_note)
     return 0

@@ -41,7 +41,8 @@ def add_export(sub: Any) -> None:
     p = sub.add_parser("export", help="a run's records as one tidy table (CSV)")
     p.add_argument("dir", help="a `tatl run` output folder (its --out)")
     p.add_argument("--format", choices=("csv",), default="csv", help="csv (Parquet would need pyarrow or pandas)")
-    p.add_argument("--out", default=None, help="the table's path (default: DIR/export.csv)")
+    p.add_argument("--out", default=None, help="the table's path (default: DIR/export.csv, DIR/export-final.csv)")
+    p.add_argument("--final", action="store_true", help="one row per method, seed and experiment: its largest budget's")
     p.set_defaults(func=_export)
 
 
@@ -49,7 +50,7 @@ def _export(args: argparse.Namespace) -> int:
     from tatl_mj.experiments.results import export, records
 
     try:
-        path = export.export(args.dir, args.out, args.format)
+        path = export.export(args.dir, args.out, args.format, final=args.final)
     except (export.ExportError, records.RecordError) as error:
         print(f"tatl export: {error}", file=sys.stderr)
         return 2

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,25 +45,15 @@ def check_out(out: str) -> str | None:
     return None
 
 
-def parse_methods(text: str | None) -> dict | None:
-    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method object, or None for a built-in}.
-
-    Built-ins run with the spec's settings for them; ``module:attr`` entries are
-    imported, ``attr`` being a class (instantiated without arguments) or an
-    instance whose ``name`` names it in the results. None (no --methods): each
-    spec's own ``[methods]``.
-    """
+def parse_methods(text: str | None, specs: Sequence[Any] = ()) -> dict | None:
+    """``ta-tl,rl,mypkg.mine:MyMethod`` -> {name: method object, or None for a built-in or a
+    method the specs list}; None (no --methods): each spec's own ``[methods]``. ValueError in
+    one line (``registry.parse_methods``)."""
     from tatl_mj.transfer import registry
 
     if text is None:
         return None
-    methods: dict = {}
-    for entry in filter(None, (e.strip() for e in text.split(","))):
-        if ":" not in entry:
-            methods[entry] = None  # a built-in or a spec's variant: the runner checks it against each spec
-            continue
-        obj = registry.resolve(entry)
-        methods[obj.name] = obj
+    methods = registry.parse_methods(text, [m for s in specs for m in s.methods])
     if not methods:
         raise ValueError("no methods given")
     return methods

@@ -84,7 +84,7 @@ def _checked_run(args: argparse.Namespace) -> tuple[list, range, dict | None] | 
     if isinstance(seeds, str):
         return seeds
     try:
-        methods = options.parse_methods(args.methods)
+        methods = options.parse_methods(args.methods, specs)
     except ValueError as error:
         return f"--methods: {error}"
     return specs, seeds, methods

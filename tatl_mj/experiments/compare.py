@@ -34,10 +34,14 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import json
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any
 
+from tatl_mj.experiments import compare_report
+from tatl_mj.experiments import compare_settings as settings_mod
 from tatl_mj.experiments.report import plot
 from tatl_mj.experiments.results import summary as summary_mod
 from tatl_mj.experiments.results.records import (
@@ -51,7 +55,14 @@ from tatl_mj.experiments.results.records import (
 from tatl_mj.experiments.results.reference import ReferenceSet
 from tatl_mj.experiments.run import kernels as kernels_mod
 from tatl_mj.experiments.run import runner
-from tatl_mj.experiments.spec import ExperimentSpec, conditions, content_hash, dynamics_versions, spec_to_dict
+from tatl_mj.experiments.spec import (
+    NOT_CONTENT,
+    ExperimentSpec,
+    conditions,
+    content_hash,
+    dynamics_versions,
+    spec_to_dict,
+)
 from tatl_mj.transfer import roles
 
 PAIR_KINDS = roles.PAIR_KEYS
@@ -78,12 +89,15 @@ class CompareError(ValueError):
 class Plan:
     """A checked comparison: the reference, the experiments (sweeps expanded) to run, with a
     table for each built-in renamed, the user's methods by name (None: a built-in run with
-    each spec's settings for it) and their declared pairs."""
+    each spec's settings for it; {experiment: method object} where a settings file gives it
+    settings per experiment), their declared pairs, and the settings file with what it set."""
 
     reference: ReferenceSet
     specs: tuple[ExperimentSpec, ...]
     methods: dict[str, Any]
     pairs: dict[str, tuple[tuple[str, str], ...]]
+    settings: settings_mod.Settings | None = None
+    settings_used: dict[str, dict[str, dict[str, Any]]] = dataclasses.field(default_factory=dict)
 
     @property
     def preset(self) -> str:
@@ -133,8 +147,9 @@ def check_spec(reference: ReferenceSet, spec: ExperimentSpec) -> None:
     mine, theirs = content_hash(spec, manifest.preset), entry["content_hash"]
     if mine != theirs:
         raise CompareError(
-            f"{spec.path}: the content of {spec.name!r} differs from the spec reference {name!r} was made from "
-            f"(content hash {mine[:12]} against {theirs[:12]}): compare the spec as tatl-mj "
+            f"{spec.path}: the content of {spec.name!r} differs from the spec reference {name!r} was made from"
+            f"{_first_difference(reference, spec)} (content hash {mine[:12]} against {theirs[:12]}): compare the "
+            f"spec as tatl-mj "
             f"{manifest.package_version} ships it, or make a reference of your own from a run of yours "
             "(`tatl reference build`)"
         )
@@ -146,6 +161,43 @@ def check_spec(reference: ReferenceSet, spec: ExperimentSpec) -> None:
         )
 
 
+def _content(table: Any, preset: str) -> Any:
+    """A spec's content as :func:`spec.content_hash` hashes it, in JSON's plain types."""
+    table = {k: v for k, v in dict(table).items() if k not in NOT_CONTENT}
+    table["presets"] = {preset: table["presets"].get(preset)}
+    return json.loads(json.dumps(table))
+
+
+def _diff(mine: Any, theirs: Any, path: str = "") -> tuple[str, Any, Any] | None:
+    """The first key path (in sorted order) at which two JSON values differ, with both values."""
+    if isinstance(mine, dict) and isinstance(theirs, dict):
+        for key in sorted(set(mine) | set(theirs)):
+            where = f"{path}.{key}" if path else key
+            if key not in mine or key not in theirs:
+                return where, mine.get(key, "(absent)"), theirs.get(key, "(absent)")
+            found = _diff(mine[key], theirs[key], where)
+            if found:
+                return found
+        return None
+    if isinstance(mine, list) and isinstance(theirs, list) and len(mine) == len(theirs):
+        return next((d for i, (a, b) in enumerate(zip(mine, theirs)) if (d := _diff(a, b, f"{path}[{i}]"))), None)
+    return None if mine == theirs and type(mine) is type(theirs) else (path, mine, theirs)
+
+
+def _first_difference(reference: ReferenceSet, spec: ExperimentSpec) -> str:
+    """`` at KEY (yours V, the reference's W)``, the first key whose value differs; empty where
+    the reference holds no copy of the spec to compare with."""
+    theirs = reference.specs().get(spec.name)
+    if theirs is None:
+        return ""
+    preset = reference.manifest.preset
+    found = _diff(_content(spec_to_dict(spec), preset), _content(theirs, preset))
+    if found is None:
+        return ""
+    key, mine, other = found
+    return f" at {key} (yours {json.dumps(mine)}, the reference's {json.dumps(other)})"
+
+
 def plan(
     reference: ReferenceSet,
     specs: list[ExperimentSpec],
@@ -155,6 +207,7 @@ def plan(
     pairs: dict[str, list[tuple[str, str]]] | None = None,
     preset: str | None = None,
     seeds: list[int] | None = None,
+    settings: settings_mod.Settings | None = None,
 ) -> Plan:
     """Checks everything a comparison needs, before any work; :class:`CompareError` if it cannot run.
 
@@ -163,7 +216,8 @@ def plan(
     under the new name with that spec's settings for it (a variant table, as
     ``[methods.NEW] method = "ta-tl"`` makes, so it is paired as that method is);
     ``pairs``: per kind in :data:`PAIR_KINDS`, (one of those, its ablation or placebo:
-    another of them or a reference method).
+    another of them or a reference method); ``settings``: a settings file's tables
+    (``compare_settings``), each checked and applied here.
     """
     check_reference(reference, preset, seeds)
     expanded = [condition for spec in specs for condition in conditions(spec)]
@@ -187,11 +241,25 @@ def plan(
         )
     pairs = pairs or {}
     _check_pairs(reference, expanded, methods, pairs)
+    specs_run = [_with_renamed(spec, renamed) for spec in expanded]
+    used: dict[str, dict[str, dict[str, Any]]] = {}
+    if settings is not None:
+        parents = {c.name: spec.name for spec in specs for c in conditions(spec)}
+        try:
+            methods, used = settings_mod.apply(settings, methods, specs_run, parents)
+        except ValueError as error:
+            raise CompareError(str(error)) from None
+    try:  # here, so that a method that cannot run is refused before --out is touched
+        runner.check_methods(specs_run, reference.manifest.preset, methods)
+    except runner.MethodError as error:
+        raise CompareError(f"--methods: {error}") from None
     return Plan(
         reference=reference,
-        specs=tuple(_with_renamed(spec, renamed) for spec in expanded),
+        specs=tuple(specs_run),
         methods=dict(methods),
         pairs={kind: tuple(tuple(p) for p in pairs.get(kind, ())) for kind in PAIR_KINDS},  # type: ignore[misc]
+        settings=settings,
+        settings_used=used,
     )
 
 
@@ -232,25 +300,48 @@ def _with_renamed(spec: ExperimentSpec, renamed: dict[str, str]) -> ExperimentSp
 
 @dataclasses.dataclass(frozen=True)
 class Outcome:
-    """What a comparison wrote: its summary, and the one note on kernels (None when the
-    user's records were computed with the reference's kernels)."""
+    """What a comparison wrote: its summary, the one short note on kernels (None when the
+    user's records were computed with the reference's kernels; the long form is in
+    compare.json), and what the reference's seeds can resolve."""
 
     summary: dict
     kernels_note: str | None
     paths: list[Path]
+    resolution: str = ""
 
 
-def _claim(out: Path, planned: Plan) -> None:
-    """Marks ``out`` as a comparison against the plan's reference; refuses one against another."""
+def _claim(out: Path, planned: Plan, detail: str | None) -> None:
+    """Marks ``out`` as a comparison against the plan's reference, with its settings file (copied
+    in, its hash recorded); refuses one against another reference or with other settings."""
     path = out / COMPARISON
+    digest = planned.settings.sha256 if planned.settings is not None else None
     if path.exists():
-        earlier = read_json(path).get("reference")
-        if earlier != planned.reference.name:
+        earlier = read_json(path)
+        if earlier.get("reference") != planned.reference.name:
             raise CompareError(
-                f"--out {out}: holds a comparison against reference {earlier!r}, not {planned.reference.name!r}; "
-                "use another --out"
+                f"--out {out}: holds a comparison against reference {earlier.get('reference')!r}, not "
+                f"{planned.reference.name!r}; use another --out"
             )
-    write_json(path, {"reference": planned.reference.name, "methods": sorted(planned.methods)})
+        if (earlier.get("settings") or {}).get("sha256") != digest:
+            raise CompareError(
+                f"--out {out}: holds a comparison made with other --settings (its records would not follow "
+                "yours); use another --out"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    settings = None
+    if planned.settings is not None:
+        shutil.copyfile(planned.settings.path, out / settings_mod.FILE)
+        settings = {"file": settings_mod.FILE, "sha256": digest, "applied": planned.settings_used}
+    write_json(
+        path,
+        {
+            "reference": planned.reference.name,
+            "methods": sorted(planned.methods),
+            "settings": settings,
+            "kernels": detail,
+            "resolution": compare_report.resolution(len(planned.seeds)),
+        },
+    )
 
 
 def _reference_records(planned: Plan, run: RunDirectory) -> collections.Counter[str]:
@@ -267,23 +358,39 @@ def _reference_records(planned: Plan, run: RunDirectory) -> collections.Counter[
     return counts
 
 
-def kernels_note(planned: Plan, computed: dict[str, int], pin: kernels_mod.Pin | None) -> str | None:
-    """One note where the user's records were computed with other kernels than the reference's,
-    with the verdicts the reference marks as moving with them; None where they were not."""
-    theirs = set(planned.reference.manifest.kernels)
-    if set(computed) <= theirs and len(theirs) == 1:
-        return None
-    why = f" ({pin.why_not})" if pin is not None and pin.why_not else ""
-    fragile = [
+def _fragile(planned: Plan) -> list[str]:
+    return [
         f"{v['experiment']}: {v['method']} vs {v['versus']}"
         for v in planned.reference.manifest.fragile_verdicts
         if v["experiment"] in {s.name for s in planned.specs}
     ]
-    listed = "; ".join(fragile) if fragile else "none are marked in its manifest"
+
+
+def kernels_detail(planned: Plan, computed: dict[str, int], pin: kernels_mod.Pin | None) -> str | None:
+    """The long form of :func:`kernels_note`, kept in compare.json: both sets of kernels, why
+    they could not be pinned, and the verdicts the reference marks as moving with them."""
+    theirs = set(planned.reference.manifest.kernels)
+    if set(computed) <= theirs and len(theirs) == 1:
+        return None
+    why = f" ({pin.why_not})" if pin is not None and pin.why_not else ""
+    listed = "; ".join(_fragile(planned)) or "none are marked in its manifest"
     return (
-        f"note: your units were computed with the arithmetic kernels {sorted(computed)}, reference "
+        f"your units were computed with the arithmetic kernels {sorted(computed)}, reference "
         f"{planned.reference.name!r}'s with {sorted(theirs)}{why}: per-seed returns can differ, and these verdicts "
         f"are known to move with the kernels: {listed}"
+    )
+
+
+def kernels_note(planned: Plan, computed: dict[str, int], pin: kernels_mod.Pin | None) -> str | None:
+    """One short line where the user's records were computed with other kernels than the
+    reference's (:func:`kernels_detail` in compare.json has the rest); None where they were not."""
+    if kernels_detail(planned, computed, pin) is None:
+        return None
+    fragile = len(_fragile(planned))
+    moving = f"{fragile} verdict{'s' if fragile != 1 else ''} marked as moving with them"
+    return (
+        f"note: other arithmetic kernels than reference {planned.reference.name!r}'s; per-seed returns can "
+        f"differ ({moving}; {COMPARISON} has the details)"
     )
 
 
@@ -299,28 +406,34 @@ def run(
     """Runs the plan's units into ``out`` (resumable, as ``tatl run``), adds the reference's
     records, and writes summary.json, results.md and the figures; returns what it wrote.
 
-    ``pin``: the kernels to run the user's units with (``kernels.pin_to`` of the reference's,
-    None: this machine's own). Pinned units run in spawned workers, at least two, as the
-    setting must be in place before a process loads numpy. Raises ``runner.RunFailed``
-    (after writing the rest) where a unit failed.
+    Before anything is written, each user method's policy is rehearsed on a tiny problem of
+    each pair of tasks (``runner.check_methods``): :class:`CompareError` where it answers
+    other than its target takes. ``pin``: the kernels to run the user's units with
+    (``kernels.pin_to`` of the reference's, None: this machine's own). Pinned units run in
+    spawned workers, at least two, as the setting must be in place before a process loads
+    numpy. Raises ``runner.RunFailed`` (after writing the rest) where a unit failed.
     """
     out = Path(out)
+    try:
+        runner.check_methods(list(planned.specs), planned.preset, planned.methods, planned.seeds[0], rehearse=True)
+    except runner.MethodError as error:
+        raise CompareError(f"--methods: {error}") from None
     if pin is not None and pin.env:
         workers = max(workers, 2)
     run_dir = RunDirectory(out)
-    out.mkdir(parents=True, exist_ok=True)
-    _claim(out, planned)
+    _claim(out, planned, None)
     failed: runner.RunFailed | None = None
     with _workers(pin):
         try:
             own = runner.run(
                 list(planned.specs), planned.preset, planned.seeds, out, workers=workers, methods=planned.methods,
-                progress=progress,
+                progress=progress, rehearse=False,
             )  # fmt: skip
         except runner.RunFailed as error:
             failed, own = error, error.summary
     counts = _reference_records(planned, run_dir) + collections.Counter(own["kernels"])
-    note = kernels_note(planned, own["kernels"], pin)
+    note, detail = kernels_note(planned, own["kernels"], pin), kernels_detail(planned, own["kernels"], pin)
+    _claim(out, planned, detail)
     summary = summary_mod.build(
         run_dir,
         specs=[_summary_spec(s, planned) for s in planned.specs],
@@ -339,14 +452,16 @@ def run(
             "methods": sorted(planned.methods),
             "pairs": _pairs_json(planned),
             "kernels_note": note,
+            "kernels_detail": detail,
         },
     )
     write_json(run_dir.summary, summary)
     paths = plot.plot(out)
-    _head_results(out / "results.md", planned, note)
+    _head_results(out / "results.md", planned, note, summary)
     if failed is not None:
         raise failed
-    return Outcome(summary=summary, kernels_note=note, paths=paths)
+    resolution = compare_report.resolution(len(planned.seeds))
+    return Outcome(summary=summary, kernels_note=note, paths=paths, resolution=resolution)
 
 
 def _summary_spec(spec: ExperimentSpec, planned: Plan) -> dict:
@@ -373,8 +488,9 @@ def _methods(planned: Plan) -> list[str]:
     return [*held, *planned.methods]
 
 
-def _head_results(path: Path, planned: Plan, note: str | None) -> None:
-    """Opens results.md with what the tables compare: the reference and the user's methods."""
+def _head_results(path: Path, planned: Plan, note: str | None, summary: dict) -> None:
+    """Opens results.md with what the tables compare (the reference and the user's methods),
+    what its seeds can resolve, and the user's own verdicts (``compare_report.table``)."""
     manifest = planned.reference.manifest
     pairs = [f"`{m}` against `{o}` ({kind})" for kind, listed in planned.pairs.items() for m, o in listed]
     head = (
@@ -384,7 +500,11 @@ def _head_results(path: Path, planned: Plan, note: str | None) -> None:
         + (f"Your pairs: {'; '.join(pairs)}." if pairs else "You declared no ablation or placebo of your own "
            "(`--ablation`, `--placebo`): your methods are ranked against the best baseline only.")
     )  # fmt: skip
-    lines = [head, ""] + ([note.removeprefix("note: ").capitalize(), ""] if note else [])
+    if planned.settings is not None:
+        head += f" Settings per experiment: `{settings_mod.FILE}` (sha256 {planned.settings.sha256[:12]})."
+    lines = [head, "", compare_report.resolution(len(planned.seeds)), ""]
+    lines += [note.removeprefix("note: ").capitalize(), ""] if note else []
+    lines += ["## Your verdicts", "", *compare_report.table(summary, list(planned.methods)), ""]
     path.write_text("\n".join(lines) + "\n" + path.read_text())
 
 

@@ -14,6 +14,7 @@ import dataclasses
 import functools
 import inspect
 import typing
+from collections.abc import Collection
 from typing import Any, Callable
 
 from tatl_mj import plugins
@@ -152,10 +153,53 @@ def _construct(cls: type, path: str, given: dict[str, Any], name: str | None) ->
         raise ValueError(f"method {path!r}: {path.partition(':')[2]}(**settings) failed: {error}") from None
 
 
+def method_forms(listed: Collection[str] = (), renames: bool = False) -> str:
+    """The forms ``--methods`` takes, in words, for its one-line refusals."""
+    shown = sorted(set(METHODS) | set(listed))
+    rename = "NEW=BUILTIN (a method the specs list, under a new name), " if renames else ""
+    return (
+        f"valid forms: a built-in or a method the specs list ({', '.join(shown)}), {rename}"
+        "or your own as module:Class (e.g. mypkg.mine:MyMethod, a colon before the class)"
+    )
+
+
+def parse_methods(text: str, listed: Collection[str] = (), renames: bool = False) -> dict[str, Any]:
+    """``--methods`` (``ta-tl,rl,mypkg.mine:MyMethod``) as {name: method object, or None for a
+    built-in or a method the specs list (``listed``)}; ValueError, one line naming the entry and
+    the valid forms (:func:`method_forms`), for an unknown name, a dotted path without its colon,
+    a path that cannot be imported, or an object that is not a method. Checks only; runs nothing.
+
+    A ``module:attribute`` entry is a class (instantiated without arguments) or an instance,
+    recorded under its ``name``. ``renames``: ``NEW=BUILTIN`` entries (``tatl compare``) are
+    left to the caller.
+    """
+    methods: dict[str, Any] = {}
+    for entry in filter(None, (e.strip() for e in text.split(","))):
+        if renames and "=" in entry:
+            continue
+        if ":" in entry:
+            try:
+                obj = resolve(entry)
+            except ValueError as error:
+                raise ValueError(f"{error}; {method_forms(listed, renames)}") from None
+            methods[obj.name] = obj
+        elif entry in METHODS or entry in listed:
+            methods[entry] = None  # the runner checks it against each spec
+        elif "." in entry:
+            module, _, attribute = entry.rpartition(".")
+            raise ValueError(
+                f"unknown method {entry!r}: your own is named with a colon before the class "
+                f"({module}:{attribute}); {method_forms(listed, renames)}"
+            )
+        else:
+            raise ValueError(f"unknown method {entry!r}; {method_forms(listed, renames)}")
+    return methods
+
+
 def _contracted(obj: Any, label: str) -> TransferMethod:
     if not isinstance(obj, TransferMethod):
         raise ValueError(f"method {label!r} is not a TransferMethod (needs a name and learn(problem, samples))")
     return obj
 
 
-__all__ = ["METHODS", "build", "class_of", "resolve", "settings_of"]
+__all__ = ["METHODS", "build", "class_of", "method_forms", "parse_methods", "resolve", "settings_of"]

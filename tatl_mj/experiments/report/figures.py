@@ -39,7 +39,7 @@ from tatl_mj.experiments.results.comparison import (
     MethodResult,
     comparison_of,
 )
-from tatl_mj.experiments.results.summary_data import Experiment, MethodSummary, Summary
+from tatl_mj.experiments.results.summary_data import Experiment, MethodSummary, PairVerdict, Summary
 
 LINE_STYLES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)))  # cycled, so overlapping curves both show
 MARKERS = ("o", "s", "D", "^", "v", "P", "X", "h", "<", ">")  # cycled, so coinciding points both show
@@ -189,7 +189,7 @@ def _verdict_panel(ax: Any, experiment: Experiment, colors: dict[str, str]) -> N
             ax.plot([value], [row + offset], marker, color=color, markeredgecolor="black", ms=5)
             said.append(f"{question[:3]}.: {verdicts.words(pair.role)[answer.verdict]}")
         ax.text(1.02, row, "\n".join(said), va="center", fontsize=7, transform=ax.get_yaxis_transform())
-    labels = [f"{p.method} > {p.other}\n({p.role})" for p in pairs]
+    labels = [_pair_label(p) for p in pairs]
     ax.set_yticks(range(len(pairs)), labels, fontsize=7)
     ax.set_ylim(len(pairs) - 0.5, -0.5)
     ax.axvline(0.5, color="black", ls="--", lw=0.9)
@@ -199,6 +199,19 @@ def _verdict_panel(ax: Any, experiment: Experiment, colors: dict[str, str]) -> N
     if not pairs:
         ax.text(0.5, 0.5, "no declared pair in this spec", ha="center", va="center", fontsize=8)
     ax.grid(axis="x", alpha=0.25)
+
+
+PAIR_LABEL_WIDTH = 40
+"""Characters of a panel (c) label line that fit beside its axis; a longer pair is wrapped."""
+
+
+def _pair_label(pair: PairVerdict) -> str:
+    """``method > other`` over ``(role)``; a pair too long for one line is wrapped, at the
+    ``>`` first, so that its label stays clear of panel (b)."""
+    text = f"{pair.method} > {pair.other}"
+    if len(text) > PAIR_LABEL_WIDTH:
+        text = "\n".join(textwrap.wrap(f"{pair.method} >", 28) + textwrap.wrap(pair.other, 28))
+    return f"{text}\n({pair.role})"
 
 
 def interval_figure(name: str, experiment: Experiment, path: str | Path) -> Path:

@@ -45,6 +45,15 @@ class ExportError(ValueError):
     """A run folder that cannot be exported; the message names it."""
 
 
+def final_rows(rows: Iterator[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    """Of ``rows``, each method, seed and experiment's row at its experiment's largest budget."""
+    listed = list(rows)
+    largest: dict[str, int] = {}
+    for row in listed:
+        largest[row["experiment"]] = max(largest.get(row["experiment"], row["budget"]), row["budget"])
+    return (row for row in listed if row["budget"] == largest[row["experiment"]])
+
+
 def rows(run_dir: str | Path) -> Iterator[dict[str, Any]]:
     """The export's rows, from the run's summary.json (its experiments, seeds, methods and
     reference returns) and its records, in that order."""
@@ -86,14 +95,17 @@ def rows(run_dir: str | Path) -> Iterator[dict[str, Any]]:
                     }
 
 
-def export(run_dir: str | Path, out: str | Path | None = None, fmt: str = "csv") -> Path:
-    """Writes the run's tidy table to ``out`` (default ``RUN_DIR/export.csv``); returns its path."""
+def export(run_dir: str | Path, out: str | Path | None = None, fmt: str = "csv", final: bool = False) -> Path:
+    """Writes the run's tidy table to ``out`` (default ``RUN_DIR/export.csv``, with ``final``
+    ``RUN_DIR/export-final.csv``); returns its path. ``final``: only each method, seed and
+    experiment's row at the experiment's largest budget (:func:`final_rows`)."""
     if fmt not in FORMATS:
         raise ExportError(f"--format {fmt}: valid formats: {list(FORMATS)} (Parquet would need pyarrow or pandas)")
-    path = Path(out) if out is not None else Path(run_dir) / f"export.{fmt}"
+    default = f"export-final.{fmt}" if final else f"export.{fmt}"
+    path = Path(out) if out is not None else Path(run_dir) / default
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=COLUMNS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(rows(run_dir))  # None is written as an empty cell
+    writer.writerows(final_rows(rows(run_dir)) if final else rows(run_dir))  # None is written as an empty cell
     write_atomic(path, text.getvalue().encode())
     return path

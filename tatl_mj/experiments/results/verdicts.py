@@ -244,6 +244,17 @@ def sign_probability(signs: PairedSigns, confidence: float = CONFIDENCE) -> Esti
     return Estimate(k / n, low, high)
 
 
+def seeds_to_credit(n: int, confidence: float = CONFIDENCE) -> int | None:
+    """The fewest of ``n`` paired seeds that must favour a method (the rest against it, no tie)
+    for :func:`sign_probability`'s interval to lie above 0.5, so that :func:`verdict` can credit
+    it (by symmetry, as many against it to find it worse); None where even all ``n`` cannot:
+    at 95%, 5 of 5 gives [0.48, 1.00], 6 of 6 [0.54, 1.00], and 9 of 10 [0.55, 1.00]."""
+    for k in range(n + 1):
+        if verdict(sign_probability(PairedSigns(k, 0, n - k), confidence)) == CREDITED:
+            return k
+    return None
+
+
 def sign_p_value(signs: PairedSigns) -> float:
     """The two-sided p-value of the sign test matching :func:`sign_probability`'s interval.
 
@@ -477,6 +488,7 @@ __all__ = [
     "normalised",
     "paired_signs",
     "scored",
+    "seeds_to_credit",
     "sign_p_value",
     "sign_probability",
     "transitions",

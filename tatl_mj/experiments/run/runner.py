@@ -46,7 +46,7 @@ from tatl_mj.experiments.results.records import (
     write_atomic,
     write_json,
 )
-from tatl_mj.experiments.run import determinism, executors, lock, method_unit, sides, source_unit
+from tatl_mj.experiments.run import determinism, executors, lock, method_unit, rehearsal, sides, source_unit
 from tatl_mj.experiments.run.kernels import kernels
 from tatl_mj.experiments.spec import (
     NOT_CONTENT,
@@ -210,7 +210,7 @@ def _plan(
     for such a built-in).
     """
     given = methods.items() if isinstance(methods, dict) else []
-    custom = {k: registry.resolve(v, label=k) for k, v in given if v is not None}
+    custom = {k: _resolved(v, k) for k, v in given if v is not None}
     units = []
     for spec in specs:
         names = list(spec.methods) if methods is None else list(methods)
@@ -225,6 +225,39 @@ def _plan(
                 _check_applies(spec, name)
         units += [Unit(spec.name, seed, name) for seed in seeds for name in [SOURCE_UNIT, *names]]
     return units, custom
+
+
+def check_methods(
+    specs: list[ExperimentSpec],
+    preset: str,
+    methods: Iterable[str] | dict[str, Any] | None,
+    seed: int = 0,
+    rehearse: bool = False,
+) -> None:
+    """:class:`MethodError` where a method asked for cannot run on one of ``specs`` (sweeps
+    expanded), and with ``rehearse`` where a user's policy answers other than its target takes:
+    what :func:`run` checks first, for a caller that writes before it runs."""
+    expanded = [c for spec in specs for c in conditions(spec)]
+    _, custom = _plan(expanded, preset, [seed], methods)
+    if rehearse:
+        check_policies(expanded, preset, custom, seed)
+
+
+def check_policies(specs: list[ExperimentSpec], preset: str, custom: dict[str, Any], seed: int = 0) -> None:
+    """:class:`MethodError` where a user's policy, learned on a tiny problem of a spec's tasks,
+    answers other than its target takes (``rehearsal.rehearse``); before any source work."""
+    try:
+        rehearsal.rehearse(specs, preset, custom, seed)
+    except rehearsal.RehearsalError as error:
+        raise MethodError(str(error)) from None
+
+
+def _resolved(method: Any, name: str) -> Any:
+    """A user's method object checked against the contract, or {experiment: such an object}
+    where it has settings of its own per experiment (``tatl compare --settings``)."""
+    if isinstance(method, dict):
+        return {experiment: registry.resolve(obj, label=name) for experiment, obj in method.items()}
+    return registry.resolve(method, label=name)
 
 
 # What a method unit's record may depend on besides its method and seed: everything in
@@ -347,6 +380,7 @@ def run(
     address: str | None = None,
     methods: Iterable[str] | dict[str, Any] | None = None,
     progress: bool = True,
+    rehearse: bool = True,
 ) -> dict:
     """Runs (or resumes) every unit; writes and returns the summary.
 
@@ -355,8 +389,11 @@ def run(
 
     ``methods``: None runs each spec's own ``[methods]``; a list of names runs
     those built-ins; a dict maps names to method objects implementing
-    ``tatl_mj.transfer.method.TransferMethod`` (picklable, to run in worker processes).
+    ``tatl_mj.transfer.method.TransferMethod`` (picklable, to run in worker processes), or to
+    {experiment: such an object} for one with settings of its own per experiment.
     A spec with a ``[sweep]`` runs as one experiment per condition (``spec.conditions``).
+    With ``rehearse``, each user method first learns on a tiny problem of each pair of tasks
+    and its policy answers a few target states (``rehearsal``): :class:`MethodError` there.
     """
     dispatch = executors.dispatcher(executor, workers, address)
     specs = [condition for spec in specs for condition in conditions(spec)]  # a sweep: one per condition
@@ -369,6 +406,8 @@ def run(
     if not seeds or not specs or (methods is not None and not list(methods)):  # never touch a folder for nothing
         raise ValueError(f"nothing to run: {len(specs)} specs, {len(seeds)} seeds, methods {methods!r}")
     all_units, custom = _plan(specs, preset, seeds, methods)
+    if rehearse:
+        check_policies(specs, preset, custom, seeds[0])
     run_dir = RunDirectory(out)
     with lock.hold(run_dir.root):  # [robustness] one run per --out; raises lock.LockHeld
         run_dir.remove_temporaries()  # a crashed run's half-written files
@@ -506,7 +545,10 @@ class Scheduler:
 
     def _job(self, unit: Unit, blob: bytes | None) -> executors.Job:
         args = (self.by_name[unit.experiment], self.preset, unit, blob)
-        return unit, args if unit.name == SOURCE_UNIT else (*args, self.custom.get(unit.name))
+        transfer = self.custom.get(unit.name)
+        if isinstance(transfer, dict):  # settings of its own per experiment
+            transfer = transfer[unit.experiment]
+        return unit, args if unit.name == SOURCE_UNIT else (*args, transfer)
 
     def _unlocked(self, source: Unit) -> list[executors.Job]:
         """The jobs waiting for ``source``: its method units (skipped if it failed), then the source
