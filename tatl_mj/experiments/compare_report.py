@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.results import statistics as stats
 from tatl_mj.experiments.results import verdicts
 
 NEAR_RANDOM = 0.1
@@ -37,7 +36,7 @@ def resolution(n: int) -> str:
             "the exact sign test's 95% interval then lies clear of 0.5."
         )
     fewest = next(m for m in range(n + 1, 100) if verdicts.seeds_to_credit(m) is not None)
-    all_of = stats.sign_probability(stats.PairedSigns(n, 0, 0))
+    all_of = verdicts.sign_probability(verdicts.PairedSigns(n, 0, 0))
     return (
         f"On {n} seeds no pair can be credited or found worse, however clear: even {n} of {n} seeds better gives "
         f"the exact sign test's 95% interval [{all_of.low:.2f}, {all_of.high:.2f}], which holds 0.5 (it takes at "
