@@ -64,8 +64,8 @@ def test_a_plugin_with_its_declared_ablation_is_credited_against_it(compared, ti
     mine = results[results.index("## Your verdicts") : results.index("## Your verdicts") + 3000]
     assert "| tiny_flip | `source-policy` | `zero` (ablation) | " in mine
     assert "| tiny_flip | `source-policy` | `uma-tl` (best baseline) | " in mine
-    assert "| tiny_flip | `source-policy` | `ta-tl` (the built-in TA-TL, outside the rule) | " in mine
-    assert "| tiny_flip | `zero` | `ta-tl` (the built-in TA-TL, outside the rule) | " in mine
+    assert "| tiny_flip | `source-policy` | `ta-tl` (the built-in TA-TL, outside the rule, privileged) | " in mine
+    assert "| tiny_flip | `zero` | `ta-tl` (the built-in TA-TL, outside the rule, privileged) | " in mine
     assert results.index("## Your verdicts") < results.index("| `source-policy` | `zero` (source-free) |")
     claimed = records.read_json(out / "compare.json")
     assert claimed["settings"] is None and claimed["kernels"] is None

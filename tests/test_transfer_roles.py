@@ -19,11 +19,12 @@ from tatl_mj.transfer.method import Contract, contract
 SPECS = sorted([*ROOT.glob("tasks/*.toml"), *ROOT.glob("tasks/variants/*.toml"), *ROOT.glob("tasks/sweeps/*.toml")])
 
 # The built-ins' roles. Privileged: simulator resets (the -reset protocol), the target's reward
-# function at states spread over its reset box (apprentice-fqi), the target's true model or its
-# simulator stepped from a chosen state (the oracles).
+# function at states spread over its reset box (apprentice-fqi) or at its apprentice's predicted
+# rollouts (ta-tl's Algorithm 2, on by default), the target's true model or its simulator stepped
+# from a chosen state (the oracles).
 SOURCE_FREE = {"rl", "rl-reset", "rl-online", "apprentice-fqi", "apprentice-upright", "replan-no-source"}
 BASELINES = {"uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset"}
-PRIVILEGED = {"rl-reset", "uma-tl-reset", "apprentice-fqi", "ta-tl-oracle", "ta-tl-h-oracle"}
+PRIVILEGED = {"rl-reset", "uma-tl-reset", "apprentice-fqi", "ta-tl", "ta-tl-oracle", "ta-tl-h-oracle"}
 ABLATION_OF = {
     "rl": ("uma-tl", "uma-tl-prior"),
     "rl-reset": ("uma-tl-reset",),
@@ -157,3 +158,23 @@ def test_base_of_reads_the_variant_key():
     assert roles.base_of("ta-tl") == "ta-tl"
     assert roles.base_of("mine", {"method": "ta-tl-h", "horizon": 5}) == "ta-tl-h"
     assert roles.plugin_path({"method": "pkg.mod:Cls"}) == "pkg.mod:Cls" and roles.plugin_path({"method": "rl"}) is None
+
+
+def test_algorithm2_makes_ta_tl_privileged_and_without_it_it_is_not():
+    assert contract(registry.resolve("ta-tl", {})).privileged
+    assert not contract(registry.resolve("ta-tl-no-alg2", {"method": "ta-tl", "zeta": None})).privileged
+    assert contract(registry.resolve("h", {"method": "ta-tl-h", "zeta": 0.1})).privileged
+    assert not contract(registry.resolve("h", {"method": "ta-tl-h"})).privileged
+
+
+def test_the_verdict_tables_label_every_privileged_side():
+    from tatl_mj.experiments.report import tables
+    from tatl_mj.experiments.results.summary_data import PairVerdict
+
+    methods = {"ta-tl": {}, "ta-tl-no-alg2": {"method": "ta-tl", "zeta": None}, "apprentice-fqi": {}, "rl": {}}
+    marked = tables.privileged(methods)
+    assert marked == {"ta-tl", "apprentice-fqi"}
+    pair = PairVerdict("ta-tl-no-alg2", "apprentice-fqi", "ablation", False, None, None, None)
+    assert tables.against(pair, marked) == "`apprentice-fqi` (source-free, privileged)"
+    assert tables.method_cell("ta-tl-no-alg2", marked) == "`ta-tl-no-alg2`"
+    assert tables.method_cell("ta-tl", marked) == "`ta-tl` (privileged)"

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from tatl_mj.experiments.report import tables
 from tatl_mj.experiments.results import verdicts
 
 NEAR_RANDOM = 0.1
@@ -111,10 +112,15 @@ def table(summary: Mapping[str, Any], methods: Sequence[str]) -> list[str]:
         "| experiment | yours | against | final score | efficiency | note |",
         "|---|---|---|---|---|---|",
     ]
+    marked = {
+        name: tables.privileged((experiment.get("spec") or {}).get("methods") or {})
+        for name, experiment in summary["experiments"].items()
+    }
     for row in found:
         note = f"both near random (median final score < {NEAR_RANDOM:g})" if row["near_random"] else ""
+        role = row["role"] + (f", {tables.PRIVILEGED}" if row["other"] in marked[row["experiment"]] else "")
         lines.append(
-            f"| {row['experiment']} | `{row['method']}` | `{row['other']}` ({row['role']}) | "
+            f"| {row['experiment']} | `{row['method']}` | `{row['other']}` ({role}) | "
             f"{_cell(row.get(verdicts.FINAL))} | {_cell(row.get(verdicts.EFFICIENCY))} | {note} |"
         )
     lines += [

@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from tatl_mj.experiments.report.style import interval_text, method_label, order, samples_text, seed_range
+from tatl_mj.experiments.results import pairs as pairs_mod
 from tatl_mj.experiments.results import verdicts
 from tatl_mj.experiments.results.comparison import Comparison, comparison_of
 from tatl_mj.experiments.results.summary_data import Answer, Experiment, Interval, PairVerdict, Summary
@@ -24,6 +25,27 @@ PAPER_METHODS = ("ta-tl", "uma-tl", "rl")
 VERDICT_WORDS = verdicts.words(verdicts.ABLATION, marked=True)
 BASELINE_WORDS = verdicts.words(verdicts.BEST_BASELINE, marked=True)
 ROLE_WORDS = {verdicts.ABLATION: "source-free", verdicts.PLACEBO: "placebo", verdicts.BEST_BASELINE: "best baseline"}
+PRIVILEGED = "privileged"
+"""The label of a method with target resources a robot lacks (simulator resets, the target's reward
+function at states it chooses): a verdict against it does not credit transfer (docs/protocol.md)."""
+
+
+def privileged(spec_methods: Mapping[str, object]) -> set[str]:
+    """The spec's methods whose roles declare them privileged (read from the built methods)."""
+    return {name for name, roles in pairs_mod.roles_of(spec_methods).items() if roles.privileged}
+
+
+def against(pair: PairVerdict, marked: set[str]) -> str:
+    """A pair's other side with its role, and ``privileged`` where it is."""
+    words = [ROLE_WORDS[pair.role], *([PRIVILEGED] if pair.other in marked else [])]
+    return f"`{pair.other}` ({', '.join(words)})"
+
+
+def method_cell(name: str, marked: set[str]) -> str:
+    """A pair's method, with ``(privileged)`` where it is."""
+    return f"`{name}` ({PRIVILEGED})" if name in marked else f"`{name}`"
+
+
 HOLM_MARK = "†"
 
 
@@ -185,14 +207,15 @@ def _verdict_rows(exp: Experiment) -> list[str]:
         "| efficiency: P [95% CI] | verdict | efficiency, paper's accounting: verdict |",
         "|---|---|---|---|---|---|---|---|",
     ]
+    marked = privileged(exp.spec_methods)
     for pair in pairs:
         final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
         difference = "-" if pair.final is None else interval_text(pair.final.median_difference, "+.2f")
-        against = f"`{pair.other}` ({ROLE_WORDS[pair.role]})"
+        other = against(pair, marked)
         if pair.parents:
-            against += f" (the parent `{exp.spec.get('streams')}`'s records)"
+            other += f" (the parent `{exp.spec.get('streams')}`'s records)"
         lines.append(
-            f"| `{pair.method}` | {against} | {final_p} | {difference} | {final_v} "
+            f"| {method_cell(pair.method, marked)} | {other} | {final_p} | {difference} | {final_v} "
             f"| {efficiency_p} | {efficiency_v} | {paper_v} |"
         )
     return lines
@@ -341,6 +364,7 @@ def verdict_table(
     ]
     for exp in summary.experiments.values():
         title = exp.spec.get("title", exp.spec["name"])
+        marked = privileged(exp.spec_methods)
         for pair in exp.verdicts or ():
             if pair.role not in roles or pair.parents or not pair.method.startswith(prefix):
                 continue
@@ -352,7 +376,7 @@ def verdict_table(
             final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
             mine, theirs = (exp.methods[m].final_iqm for m in (pair.method, pair.other))
             lines.append(
-                f"| {title} | `{pair.method}` | `{pair.other}` ({ROLE_WORDS[pair.role]}) | {final_p} "
+                f"| {title} | {method_cell(pair.method, marked)} | {against(pair, marked)} | {final_p} "
                 f"| {final_v} | {efficiency_p} | {efficiency_v} | {paper_v} "
                 f"| {interval_text(mine)} / {interval_text(theirs)} |"
             )

@@ -92,8 +92,8 @@ class HorizonTATL(TATL):
     @property
     def privileged(self) -> bool:
         """True for ``model = "oracle"``: it steps the real target simulator from a chosen state
-        (the zero state) to linearise it, which a robot cannot."""
-        return self.model == "oracle"
+        (the zero state) to linearise it, which a robot cannot; and with Algorithm 2 on, as ``ta-tl``."""
+        return self.model == "oracle" or super().privileged
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)

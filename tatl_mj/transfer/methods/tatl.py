@@ -75,6 +75,12 @@ class TATL:
     def __post_init__(self) -> None:
         check_settings(self)
 
+    @property
+    def privileged(self) -> bool:
+        """True with Algorithm 2 on (``zeta`` set): its U_Mhat scores the apprentice's predicted
+        states with the target task's own reward function, states no target episode visited."""
+        return self.zeta is not None
+
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         """Settings that need the tasks' descriptions (basis size, actuator)."""
         check_features(type(self).__name__, "apprentice", self.apprentice, target.state_dim)
