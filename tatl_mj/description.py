@@ -12,6 +12,7 @@ Pure numpy: ``tatl_mj.transfer`` imports it without importing mujoco.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Callable
 
@@ -178,17 +179,20 @@ class CellMap:
         if c.ndim != 2 or len(c) == 0 or not np.all(np.isfinite(c)) or np.any(c != np.rint(c)):
             raise ValueError(f"CellMap.cells must be a non-empty (S, d) array of integers, got shape {c.shape}")
         cells = c.astype(np.int64)
-        low = cells.min(axis=0)
-        shape = cells.max(axis=0) - low + 1
-        # A dense lookup over the cells' bounding box: state -> index in one fancy-index.
-        lookup = np.full(tuple(shape), -1, dtype=np.int64)
-        position = tuple((cells - low).T)
-        if np.any(lookup[position] != -1) or len(np.unique(cells, axis=0)) != len(cells):
+        if len(np.unique(cells, axis=0)) != len(cells):
             raise ValueError("CellMap.cells must not repeat a cell")
-        lookup[position] = np.arange(len(cells))
-        object.__setattr__(self, "cells", cells)
-        object.__setattr__(self, "_low", low)
-        object.__setattr__(self, "_lookup", lookup)
+        object.__setattr__(self, "cells", cells)  # frozen: the integer cells derived from the input
+
+    @functools.cached_property
+    def _low(self) -> np.ndarray:
+        return self.cells.min(axis=0)
+
+    @functools.cached_property
+    def _lookup(self) -> np.ndarray:
+        """A dense lookup over the cells' bounding box: state -> index in one fancy-index (-1: no cell)."""
+        lookup = np.full(tuple(self.cells.max(axis=0) - self._low + 1), -1, dtype=np.int64)
+        lookup[tuple((self.cells - self._low).T)] = np.arange(len(self.cells))
+        return lookup
 
     @property
     def n_cells(self) -> int:

@@ -6,8 +6,6 @@ no attribute 'flex_vertedge'``): dm-control pins the mujoco it was built against
 
 from __future__ import annotations
 
-from importlib import metadata
-
 # dm-control release -> the mujoco versions it is known to run with, [low, high).
 TESTED_PAIRS: dict[str, tuple[tuple[int, ...], tuple[int, ...]]] = {
     "1.0.50": ((3, 17), (4,)),
@@ -40,8 +38,3 @@ def check_pair(mujoco_version: str, dm_control_version: str) -> None:
             "mujoco 4 fails at suite.load with \"'MjModel' object has no attribute "
             "'flex_vertedge'\"). Run: pip install 'mujoco>=3.17,<4' 'dm-control==1.0.50'"
         )
-
-
-def check_installed() -> None:
-    """Checks the installed mujoco/dm-control pair."""
-    check_pair(metadata.version("mujoco"), metadata.version("dm-control"))

@@ -171,3 +171,51 @@ def test_a_source_cache_pickled_before_a_module_moved_is_read_at_its_new_home():
         np.testing.assert_array_equal(read.mapping[3].chi_plus(eye), kept[3].chi_plus(eye))
         assert read.mapping[4] == kept[4]
         assert read.mapping[5].region.func is problems._source_region
+
+
+def test_a_source_cache_answers_alike_with_or_without_its_derived_values():
+    # The inverses and lookups of a source's Q and mapping are derived on first use
+    # (cached properties). Older run folders pickled them inside the objects; a fresh
+    # cache may hold them or not: either round trip answers bit for bit as the original.
+    import numpy as np
+
+    from tatl_mj.description import CellMap
+    from tatl_mj.transfer.features import RBF
+    from tatl_mj.transfer.fqi import LinearQ
+    from tatl_mj.transfer.intertask_mapping import AffineMapping
+    from tatl_mj.transfer.manifold_alignment import LinearAlignment
+    from tatl_mj.transfer.tabular_q import TabularQ
+
+    states = np.random.default_rng(0).uniform(-1, 1, (7, 2))
+    cells = np.array([[0, 0], [0, 1], [1, 0], [2, 1]])
+    whitener = np.array([[2.0, 0.3], [0.0, 1.5]])
+
+    def build():
+        rng = np.random.default_rng(1)
+        return [
+            LinearQ(RBF.grid([-1, -1], [1, 1], 9, [0.4, 0.7]), rng.standard_normal((3, 10))),
+            LinearQ(RBF.grid([-np.pi, -1], [np.pi, 1], 9, 0.5, periodic=[True, False]), rng.standard_normal((3, 10))),
+            AffineMapping(np.array([[1.0, 2.0], [0.5, -1.0]]), np.array([0.1, 0.2])),
+            LinearAlignment(np.ones(2), whitener, -np.ones(2), whitener.T, np.eye(2), np.diag([1.0, -2.0]), np.ones(2)),
+            TabularQ(rng.standard_normal((4, 3)), cells),
+            CellMap(cells),
+        ]
+
+    def ask(obj):
+        if isinstance(obj, LinearQ):
+            return obj.values(states)
+        if isinstance(obj, TabularQ):
+            return obj.values(cells.astype(float))
+        if isinstance(obj, CellMap):
+            return obj.index(cells[::-1])
+        return np.concatenate([obj.chi(states), obj.chi_plus(states)])
+
+    unused = [pickle.loads(pickle.dumps(obj)) for obj in build()]  # pickled before any value was derived
+    originals = build()
+    answers = [ask(obj) for obj in originals]
+    used = [pickle.loads(pickle.dumps(obj)) for obj in originals]  # with them inside, as older caches
+    assert "_inverse" in vars(used[0].features) and "_inverse" not in vars(unused[0].features)
+    assert "_lookup" in vars(used[-1]) and "_lookup" not in vars(unused[-1])
+    for answer, without, within in zip(answers, unused, used):
+        np.testing.assert_array_equal(ask(without), answer)
+        np.testing.assert_array_equal(ask(within), answer)

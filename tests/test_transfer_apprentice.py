@@ -89,6 +89,14 @@ def test_learn_apprentice_grows_batches_until_the_utility_gap_is_small():
 def test_apprentice_validates_shapes():
     with pytest.raises(ValueError, match="same d"):
         Apprentice(np.zeros((2, 3)), np.zeros((3, 1)), LinearFeatures())
+    # fit_apprentice builds the arrays and the mask; given directly they are checked, not converted.
+    with pytest.raises(ValueError, match="Apprentice.B must be a 2-D float64 array"):
+        Apprentice(np.zeros((2, 3)), np.ones(2), LinearFeatures())
+    with pytest.raises(ValueError, match="Apprentice.W must be a 2-D float64 array"):
+        Apprentice([[0.0] * 3] * 2, np.ones((2, 1)), LinearFeatures())
+    for mask in ((False, False), [True, False]):
+        with pytest.raises(ValueError, match="periodic_mask gives it"):
+            Apprentice(np.zeros((2, 3)), np.ones((2, 1)), LinearFeatures(), periodic=mask)
     app = Apprentice(np.zeros((2, 3)), np.ones((2, 1)), LinearFeatures())
     with pytest.raises(ValueError, match="columns"):
         app.predict(np.zeros((1, 2)), np.zeros((1, 2)))

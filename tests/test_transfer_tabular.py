@@ -78,6 +78,15 @@ def test_cell_map_round_trip_and_errors():
         CellMap(np.array([[0, 0], [0, 0]]))
 
 
+def test_tabular_model_keeps_its_arrays_and_refuses_other_inputs():
+    model = tabular.TabularModel(*PLAIN[:3])
+    assert all(a is b for a, b in zip((model.next_state, model.reward, model.absorbing), PLAIN[:3]))
+    with pytest.raises(ValueError, match="must be numpy arrays"):
+        tabular.TabularModel([[0]], np.zeros((1, 1)), np.zeros((1, 1), bool))
+    with pytest.raises(ValueError, match="reward must be numbers"):
+        tabular.TabularModel(np.zeros((1, 1), int), np.array([["a"]]), np.zeros((1, 1), bool))
+
+
 def test_apprentice_reproduces_the_windy_grid_after_one_visit_per_pair():
     data = one_visit_per_pair()
     apprentice = tabular.fit_tabular_apprentice(data, CELLS, SOURCE)

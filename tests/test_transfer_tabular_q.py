@@ -36,6 +36,13 @@ def test_tabular_q_indexes_one_cell_as_it_indexes_many_and_refuses_non_cells():
             q.index(np.array(bad))
 
 
+def test_tabular_q_takes_a_float64_table():
+    with pytest.raises(ValueError, match="float64"):
+        TabularQ(np.zeros((3, 2), dtype=int))
+    with pytest.raises(ValueError, match="float64"):
+        TabularQ([[0.0, 1.0]])
+
+
 def test_q_iteration_refuses_a_next_state_that_is_no_state():
     with pytest.raises(ValueError, match="state indices"):
         q_iteration(np.array([[5]]), np.zeros((1, 1)), np.zeros((1, 1), bool), 0.9)

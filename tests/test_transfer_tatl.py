@@ -134,8 +134,9 @@ def test_policy_rejects_inconsistent_inputs():
     dead = type(app)(app.W, np.zeros_like(app.B), app.features)
     with pytest.raises(ValueError, match="rank"):
         TATLPolicy(OneStepLQRQ(), CHI, source_step, dead, SOURCE_ACTIONS, SOURCE_ACTIONS, [-1], [1])
-    with pytest.raises(ValueError, match="target_low"):
-        TATLPolicy(OneStepLQRQ(), CHI, source_step, app, SOURCE_ACTIONS, SOURCE_ACTIONS, [1], [-1])
+    for low, high in (([1], [-1]), ([-1, -1], [1, 1]), ([np.nan], [1])):
+        with pytest.raises(ValueError, match="target_low"):
+            TATLPolicy(OneStepLQRQ(), CHI, source_step, app, SOURCE_ACTIONS, SOURCE_ACTIONS, low, high)
     policy = TATLPolicy(OneStepLQRQ(), CHI, source_step, app, SOURCE_ACTIONS, SOURCE_ACTIONS, [-1], [1])
     with pytest.raises(ValueError, match="NaN"):
         policy(np.array([[np.nan, 0.0]]))

@@ -1,12 +1,14 @@
 """The mujoco / dm-control pairing: a bad pair fails with a readable message."""
 
+from importlib import metadata
+
 import pytest
 
 from tatl_mj import versions
 
 
 def test_installed_pair_is_tested_and_loads():
-    versions.check_installed()
+    versions.check_pair(metadata.version("mujoco"), metadata.version("dm-control"))
     from dm_control import suite as dm_suite  # the import that breaks on a bad pair
 
     env = dm_suite.load("cartpole", "balance", task_kwargs={"random": 0})

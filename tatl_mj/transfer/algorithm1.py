@@ -32,6 +32,7 @@ angle of -3.1 against a prediction of 3.1 is a gap of 0.08, not -6.2.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Callable, ClassVar
 
 import numpy as np
@@ -105,7 +106,8 @@ class TATLPolicy:
       apprentice: P_hat_T(s, a) = W phi(s) + B_hat a.
       source_actions: (n, mS) the source's discrete action set.
       target_actions: (n, mT) the target's; row i corresponds to source row i.
-      target_low, target_high: (mT,) actuator limits the result is clipped to.
+      target_low, target_high: (mT,) actuator limits the result is clipped to (one
+        entry: the same limit for every column).
       adaptive_actions: optional (n_ad, mT) admissible set A_ad; when given the
         action is snapped to its nearest row (after clipping) instead.
       samples_used: target samples the apprentice used (Algorithm 2), for reports.
@@ -121,21 +123,21 @@ class TATLPolicy:
     target_high: np.ndarray
     adaptive_actions: np.ndarray | None = None
     samples_used: int | None = None
-    K: np.ndarray = dataclasses.field(init=False, repr=False)  # pinv(B_hat), the mixture gain
 
-    constraints: ClassVar[Constraints] = _POLICY
+    constraints: ClassVar[Constraints] = {
+        **_POLICY,
+        "target_low": [Array(1, finite=False)],
+        "target_high": [Array(1, finite=False)],
+    }
 
     def __post_init__(self) -> None:
         _check_common(self)
         m = self.target_actions.shape[1]
         if self.apprentice.action_dim != m:
             raise ValueError(f"apprentice.B has {self.apprentice.action_dim} columns, target actions have {m}")
-        low = np.broadcast_to(np.asarray(self.target_low, dtype=np.float64), (m,)).copy()
-        high = np.broadcast_to(np.asarray(self.target_high, dtype=np.float64), (m,)).copy()
-        if np.any(np.isnan(low)) or np.any(np.isnan(high)) or np.any(low > high):
-            raise ValueError(f"target_low must be <= target_high, got {low} and {high}")
-        object.__setattr__(self, "target_low", low)
-        object.__setattr__(self, "target_high", high)
+        low, high = self.target_low, self.target_high
+        if low.size not in (1, m) or high.size not in (1, m) or np.any(low > high):
+            raise ValueError(f"target_low must be <= target_high, one or {m} entries each, got {low} and {high}")
         ad = self.adaptive_actions
         if ad is not None and (ad.shape[1] != m or np.any(ad < low) or np.any(ad > high)):
             raise ValueError(f"adaptive_actions must be (n_ad, {m}) rows within [target_low, target_high]")
@@ -144,7 +146,11 @@ class TATLPolicy:
                 f"apprentice.B_hat has rank {np.linalg.matrix_rank(self.apprentice.B)} < {m}: "
                 "the target's actions have no identified effect, K = pinv(B_hat) is meaningless"
             )
-        object.__setattr__(self, "K", np.linalg.pinv(self.apprentice.B))
+
+    @functools.cached_property
+    def K(self) -> np.ndarray:
+        """pinv(B_hat), the mixture gain."""
+        return np.linalg.pinv(self.apprentice.B)
 
     def step(self, target_states: np.ndarray) -> TATLStep:
         """Runs Algorithm 1 on (N, dT) target states and returns every intermediate."""

@@ -65,6 +65,10 @@ class Apprentice:
       features: the basis phi, (N, d) -> (N, k).
       periodic: optional (d,) bools marking angle coordinates; on those, W phi(s) + B a
         is the increment on the circle and ``s' = wrap(s + W phi(s) + B a)``.
+
+    :func:`fit_apprentice` builds one from data; given directly, W and B are float64
+    arrays and ``periodic`` is None or the tuple :func:`periodic_mask` returns (it
+    has an angle), checked here and kept as given.
     """
 
     W: np.ndarray
@@ -73,16 +77,20 @@ class Apprentice:
     periodic: tuple[bool, ...] | None = None
 
     def __post_init__(self) -> None:
-        w = np.atleast_2d(np.asarray(self.W, dtype=np.float64))
-        b = np.asarray(self.B, dtype=np.float64)
-        b = b[:, None] if b.ndim == 1 else b
-        if b.ndim != 2 or b.shape[0] != w.shape[0]:
+        w, b = self.W, self.B
+        for name, value in (("W", w), ("B", b)):
+            if not (isinstance(value, np.ndarray) and value.dtype == np.float64 and value.ndim == 2):
+                raise ValueError(f"Apprentice.{name} must be a 2-D float64 array, got {np.shape(value)} {type(value)}")
+        if b.shape[0] != w.shape[0]:
             raise ValueError(f"Apprentice.W (d, k) and B (d, m) need the same d, got {w.shape} and {b.shape}")
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
             raise ValueError("Apprentice.W and B must be finite")
-        object.__setattr__(self, "W", w)
-        object.__setattr__(self, "B", b)
-        object.__setattr__(self, "periodic", periodic_mask(self.periodic, w.shape[0], "Apprentice.periodic"))
+        mask = periodic_mask(self.periodic, w.shape[0], "Apprentice.periodic")
+        if self.periodic is not None and (type(self.periodic) is not tuple or mask != self.periodic):
+            raise ValueError(
+                f"Apprentice.periodic must be None or a tuple of bools with an angle, got {self.periodic!r} "
+                f"(periodic_mask gives it: {mask!r})"
+            )
 
     @property
     def state_dim(self) -> int:

@@ -135,10 +135,15 @@ class RBF:
         object.__setattr__(self, "centers", centers)
         object.__setattr__(self, "sigma", sigma)
         object.__setattr__(self, "periodic", periodic_mask(self.periodic, d, "RBF.periodic"))
-        # Centres and states are whitened by L once, so a call is one distance matrix.
-        inverse = np.linalg.inv(sigma)
-        object.__setattr__(self, "_inverse", inverse)
-        object.__setattr__(self, "_scaled_centers", centers @ inverse.T)
+
+    # Centres and states are whitened by L once, so a call is one distance matrix.
+    @functools.cached_property
+    def _inverse(self) -> np.ndarray:
+        return np.linalg.inv(self.sigma)
+
+    @functools.cached_property
+    def _scaled_centers(self) -> np.ndarray:
+        return self.centers @ self._inverse.T
 
     @staticmethod
     def grid(

@@ -8,6 +8,7 @@ maps of Phase II are in ``manifold_alignment`` (the paper's) and ``transition_al
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -60,7 +61,10 @@ class AffineMapping:
             raise ValueError("AffineMapping.matrix and offset must be finite")
         object.__setattr__(self, "matrix", m)
         object.__setattr__(self, "offset", o)
-        object.__setattr__(self, "_inverse", np.linalg.pinv(m))
+
+    @functools.cached_property
+    def _inverse(self) -> np.ndarray:
+        return np.linalg.pinv(self.matrix)
 
     def chi(self, source_states: np.ndarray) -> np.ndarray:
         s = as_states(source_states, "source_states", self.matrix.shape[1])

@@ -32,6 +32,7 @@ The result, a :class:`LinearAlignment`, satisfies the
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import scipy.linalg
@@ -64,12 +65,22 @@ class LinearAlignment:
     beta: np.ndarray
     eigenvalues: np.ndarray
 
-    def __post_init__(self) -> None:
-        # chi = (beta^T)^+ alpha^T in standardised coordinates, likewise chi_plus.
-        object.__setattr__(self, "_chi_z", np.linalg.pinv(self.beta.T) @ self.alpha.T)
-        object.__setattr__(self, "_chi_plus_z", np.linalg.pinv(self.alpha.T) @ self.beta.T)
-        object.__setattr__(self, "_source_unwhiten", np.linalg.inv(self.source_whitener))
-        object.__setattr__(self, "_target_unwhiten", np.linalg.inv(self.target_whitener))
+    # chi = (beta^T)^+ alpha^T in standardised coordinates, likewise chi_plus; each derived once.
+    @functools.cached_property
+    def _chi_z(self) -> np.ndarray:
+        return np.linalg.pinv(self.beta.T) @ self.alpha.T
+
+    @functools.cached_property
+    def _chi_plus_z(self) -> np.ndarray:
+        return np.linalg.pinv(self.alpha.T) @ self.beta.T
+
+    @functools.cached_property
+    def _source_unwhiten(self) -> np.ndarray:
+        return np.linalg.inv(self.source_whitener)
+
+    @functools.cached_property
+    def _target_unwhiten(self) -> np.ndarray:
+        return np.linalg.inv(self.target_whitener)
 
     def embed_source(self, source_states: np.ndarray) -> np.ndarray:
         """(N, dS) -> (N, dim) shared coordinates."""

@@ -19,6 +19,7 @@ compare your own method, pass an instance of it next to these to the experiment 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Callable, NoReturn, Protocol, Sequence, runtime_checkable
 
@@ -123,9 +124,10 @@ class TransferProblem:
         The same object on every call, so that hooks may cache by policy (the
         paper-protocol data of ``policy_samples`` is collected once per problem).
         """
-        cached = self.__dict__.get("_projected_source_policy")
-        if cached is not None:
-            return cached
+        return self._projected_source_policy
+
+    @functools.cached_property
+    def _projected_source_policy(self) -> Policy:
         source_q, mapping, target = self.source_q, self.mapping, self.target
 
         def policy(states: np.ndarray) -> np.ndarray:
@@ -133,9 +135,7 @@ class TransferProblem:
             return index if target.discrete else target.action_values[index]
 
         # A function of the state alone: a tabular target's sampler asks it once per cell.
-        projected = StatePolicy(policy)
-        object.__setattr__(self, "_projected_source_policy", projected)  # frozen: a cache, not a field
-        return projected
+        return StatePolicy(policy)
 
     @property
     def has_utility_gap(self) -> bool:

@@ -74,9 +74,9 @@ PRIOR_SCOPES = ("agreeing-cells", "unvisited")
 class TabularModel:
     """A deterministic model over cell indices, as exact Q-iteration takes it.
 
-    Attributes:
-      next_state: (S, A) int64 next cell of each (cell, action).
-      reward: (S, A) float64.
+    Attributes (numpy arrays, checked and kept as given):
+      next_state: (S, A) integer next cell of each (cell, action).
+      reward: (S, A) real.
       absorbing: (S, A) bool, True where the step ends the episode with discount 0.
     """
 
@@ -85,9 +85,12 @@ class TabularModel:
     absorbing: np.ndarray
 
     def __post_init__(self) -> None:
-        nxt = np.asarray(self.next_state)
-        r = np.asarray(self.reward, dtype=np.float64)
-        done = np.asarray(self.absorbing)
+        nxt, r, done = self.next_state, self.reward, self.absorbing
+        if not all(isinstance(x, np.ndarray) for x in (nxt, r, done)):
+            raise ValueError(
+                "TabularModel next_state, reward, absorbing must be numpy arrays, got "
+                f"{type(nxt).__name__}, {type(r).__name__}, {type(done).__name__}"
+            )
         if nxt.ndim != 2 or r.shape != nxt.shape or done.shape != nxt.shape:
             raise ValueError(
                 f"TabularModel next_state, reward, absorbing must all be (S, A); "
@@ -95,13 +98,12 @@ class TabularModel:
             )
         if done.dtype != np.bool_:
             raise ValueError(f"TabularModel.absorbing must be bool, got {done.dtype}")
+        if not (np.issubdtype(r.dtype, np.integer) or np.issubdtype(r.dtype, np.floating)):
+            raise ValueError(f"TabularModel.reward must be numbers, got {r.dtype}")
         if not np.all(np.isfinite(r)):
             raise ValueError("TabularModel.reward contains NaN or infinite values")
         if not np.issubdtype(nxt.dtype, np.integer) or nxt.min() < 0 or nxt.max() >= len(nxt):
             raise ValueError(f"TabularModel.next_state must hold cell indices in 0..{len(nxt) - 1}")
-        object.__setattr__(self, "next_state", nxt.astype(np.int64))
-        object.__setattr__(self, "reward", r)
-        object.__setattr__(self, "absorbing", done)
 
     @property
     def n_cells(self) -> int:

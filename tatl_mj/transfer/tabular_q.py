@@ -9,6 +9,7 @@ its merged model (``tatl_mj.transfer.tabular``). :class:`TabularQ` is a
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -25,23 +26,27 @@ class TabularQ:
     world's ``cells`` array), was given. A cell not in ``cells`` raises ValueError.
     """
 
-    q: np.ndarray
+    q: np.ndarray  # float64, kept as given
     cells: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        q = np.asarray(self.q, dtype=np.float64)
-        if q.ndim != 2:
-            raise ValueError(f"TabularQ.q must be (S, n_actions), got shape {q.shape}")
-        object.__setattr__(self, "q", q)
+        q = self.q
+        if not (isinstance(q, np.ndarray) and q.dtype == np.float64 and q.ndim == 2):
+            raise ValueError(f"TabularQ.q must be a float64 array (S, n_actions), got {np.shape(q)} {type(q).__name__}")
         if self.cells is not None:
             cells = np.asarray(self.cells)
             if cells.shape != (len(q), 2) or np.any(cells != np.rint(cells)) or cells.min() < 0:
                 raise ValueError(f"TabularQ.cells must be ({len(q)}, 2) non-negative integers [row, col]")
-            cells = cells.astype(np.int64)
-            lookup = np.full((cells[:, 0].max() + 1, cells[:, 1].max() + 1), -1, dtype=np.int64)
-            lookup[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
-            object.__setattr__(self, "cells", cells)
-            object.__setattr__(self, "_lookup", lookup)
+            object.__setattr__(self, "cells", cells.astype(np.int64))
+
+    @functools.cached_property
+    def _lookup(self) -> np.ndarray:
+        """[row, col] -> state index over the cells' bounding box (-1: no cell); needs ``cells``."""
+        cells = self.cells
+        assert cells is not None
+        lookup = np.full((cells[:, 0].max() + 1, cells[:, 1].max() + 1), -1, dtype=np.int64)
+        lookup[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+        return lookup
 
     @property
     def n_actions(self) -> int:

@@ -94,10 +94,6 @@ class MethodResult:
     samples_to_threshold_paper: tuple[float, ...] = ()
 
     @property
-    def final_mean(self) -> float:
-        return float(np.mean(self.final_returns))
-
-    @property
     def reached(self) -> int:
         return sum(math.isfinite(v) for v in self.samples_to_threshold)
 

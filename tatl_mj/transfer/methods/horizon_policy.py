@@ -65,6 +65,7 @@ Pure numpy: nothing here imports mujoco or a suite domain.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import ClassVar, Sequence
 
@@ -218,13 +219,23 @@ class HorizonTATLPolicy:
                 )
         if self.delta is not None and self.delta.size not in (1, m):
             raise InvalidSetting(f"{owner}.delta must have one or {m} entries, got {self.delta.size}")
-        span = high - low
-        delta = np.where(np.isfinite(span) & (span > 0), 0.1 * span, 1.0) if self.delta is None else self.delta
-        object.__setattr__(self, "delta", np.broadcast_to(delta.ravel(), (m,)).copy())  # one probe per column
         if self.affine is not None:
             if self.periodic is not None:
                 raise InvalidSetting(f"{owner}.affine (closed-form responses) cannot be used with periodic coordinates")
-            object.__setattr__(self, "_closed_form", _closed_form(self.affine, self.horizon, m))
+            self._affine_responses  # noqa: B018 (derived now, so that a malformed affine is refused here)
+
+    @functools.cached_property
+    def _probe(self) -> np.ndarray:
+        """(mT,) the finite-difference probe of each action column: ``delta``, or 10% of the range."""
+        span = self.target_high - self.target_low
+        delta = np.where(np.isfinite(span) & (span > 0), 0.1 * span, 1.0) if self.delta is None else self.delta
+        return np.broadcast_to(delta.ravel(), span.shape).copy()
+
+    @functools.cached_property
+    def _affine_responses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """F_j's and G_j's parts for an ``affine`` model (:func:`_closed_form`)."""
+        assert self.affine is not None
+        return _closed_form(self.affine, self.horizon, self.target_low.size)
 
     @property
     def source_steps(self) -> int:
@@ -269,14 +280,15 @@ class HorizonTATLPolicy:
         n, d = s_T.shape
         m = nominal.shape[1]
         if self.affine is not None:
-            powers, sums, control, c, b = self._closed_form  # type: ignore[attr-defined]
+            powers, sums, control, c, b = self._affine_responses
             if powers.shape[1] != d:
                 raise ValueError(f"affine model has {powers.shape[1]} coordinates, states have {d}")
             # F_j = A^j s + (sum_{i<j} A^i)(B a_0 + c)
             free = np.einsum("jde,ne->njd", powers, s_T) + np.einsum("jde,ne->njd", sums, nominal @ b.T + c)
             return free, np.broadcast_to(control, (n, *control.shape))
         # Probe towards the inside of the actuator range so a clipping model responds.
-        step = np.where(nominal + self.delta <= self.target_high, self.delta, -self.delta)  # (N, m)
+        probe = self._probe
+        step = np.where(nominal + probe <= self.target_high, probe, -probe)  # (N, m)
         actions = np.repeat(nominal[None], m + 1, axis=0)  # block 0 nominal, block i+1 probes column i
         for i in range(m):
             actions[i + 1, :, i] += step[:, i]
