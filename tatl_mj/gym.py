@@ -270,6 +270,34 @@ def actuator_values(action: Any, space: spaces.Box, scale: np.ndarray) -> np.nda
     return np.clip(value, space.low, space.high) * scale
 
 
+def action_scale(space: spaces.Box, limit: np.ndarray) -> np.ndarray:
+    """The factor from an action of ``space`` to actuator units, where ``space`` is one of the
+    action spaces an id of a task with actuator limits ``limit`` has (normalised or not, any
+    dtype); ValueError naming both otherwise (an agent trained on another task)."""
+    for normalize in (True, False):
+        expected, scale = action_space(limit, normalize, space.dtype)
+        if expected.shape == space.shape and np.array_equal(expected.low, space.low):
+            if np.array_equal(expected.high, space.high):
+                return scale
+    raise ValueError(
+        f"action space {space} is neither of this task's: {action_space(limit, True)[0]} (normalised) "
+        f"or {action_space(limit, False)[0]} (actuator units)"
+    )
+
+
+def batch_actuator_values(actions: Any, space: spaces.Box, scale: np.ndarray) -> np.ndarray:
+    """A batch of actions of ``space`` (N, *shape) as actuator values, each as :meth:`TatlEnv.step`
+    applies it (:func:`actuator_values`: checked, clipped to the space, scaled)."""
+    actions = np.asarray(actions)
+    n = actions.shape[0] if actions.ndim else 0  # a shape of no batch is refused by the check
+    batched = spaces.Box(
+        np.broadcast_to(space.low, (n, *space.shape)),
+        np.broadcast_to(space.high, (n, *space.shape)),
+        dtype=space.dtype,  # type: ignore[arg-type]
+    )
+    return actuator_values(actions, batched, scale)
+
+
 def make_env(domain: str, task: str, task_kwargs: dict[str, Any] | None = None, **kwargs: Any) -> gymnasium.Env:
     """The ``-v2`` entry point: a :class:`TatlEnv` in a ``TimeLimit`` of the task's steps.
 

@@ -21,18 +21,28 @@ next ``reset()``. Contexts pass through to the vector env
 The N envs are one batch, not N objects: ``get_attr``, ``set_attr`` and
 ``env_method`` reach the vector env, once for every index asked. Wrap it in SB3's ``VecMonitor`` for episode statistics.
 
-Stable-Baselines3 and torch are optional (the ``sb3`` extra); nothing else in
-tatl-mj imports this module.
+A saved model scored on a spec's conditions (``tatl evaluate SPEC --policy model.zip``):
+:func:`load_model` reads it back with the algorithm its policy belongs to, and
+:func:`model_policy` turns its ``predict(observations, deterministic=True)`` into a
+tatl policy, its actions mapped to actuator values as the ids' ``step`` maps them
+(``tatl_mj.gym.batch_actuator_values``).
+
+Stable-Baselines3 and torch are optional (the ``sb3`` extra); only ``tatl evaluate``,
+given a model file, imports this module.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import hashlib
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 try:
+    import torch
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
     from stable_baselines3.common.vec_env import VecEnv
 except ImportError as error:  # the optional extra
     raise ImportError(f"tatl_mj.sb3 needs Stable-Baselines3: pip install 'tatl-mj[sb3]' ({error})") from None
@@ -40,7 +50,11 @@ except ImportError as error:  # the optional extra
 import gymnasium
 from gymnasium.vector import AutoresetMode
 
-from tatl_mj import gym as tatl_gym  # noqa: F401  (registers the ids)
+from tatl_mj import gym as tatl_gym  # registers the ids
+
+ALGORITHMS = ("SAC", "TD3", "PPO", "A2C", "DDPG", "DQN")
+"""Stable-Baselines3's algorithms a model file is read back with: the first whose policy classes
+hold the model's (TD3 and DDPG, PPO and A2C share theirs, and predict alike)."""
 
 
 def vec_env(env_id: str, num_envs: int, **kwargs: Any) -> Sb3VecEnv:
@@ -143,3 +157,78 @@ def _add_contexts(infos: list[dict[str, Any]], info: dict[str, Any]) -> None:
     if "context" in info:
         for i, env_info in enumerate(infos):
             env_info["context"] = {key: float(values[i]) for key, values in info["context"].items()}
+
+
+class PeriodicFeatures(BaseFeaturesExtractor):
+    """SB3's features extractor: each periodic coordinate of the observation (an angle, which jumps
+    from pi to -pi) as its cosine and sine, the others as they are. It sits in the network, so a
+    saved model takes the raw observation, the one ``tatl evaluate`` gives it:
+    ``policy_kwargs={"features_extractor_class": PeriodicFeatures, "features_extractor_kwargs":
+    {"periodic": suite.describe(domain, task).periodic}}``; the coordinates past ``periodic``'s
+    end (an appended context) are not periodic."""
+
+    def __init__(self, observation_space: gymnasium.spaces.Box, periodic: Sequence[bool]) -> None:
+        (size,) = observation_space.shape
+        mask = np.zeros(size, dtype=bool)
+        mask[: len(periodic)] = np.asarray(periodic, dtype=bool)
+        super().__init__(observation_space, features_dim=int(size + mask.sum()))
+        self.angles, self.others = np.flatnonzero(mask).tolist(), np.flatnonzero(~mask).tolist()
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        angles = observations[:, self.angles]
+        return torch.cat([torch.cos(angles), torch.sin(angles), observations[:, self.others]], dim=1)
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes (what ``tatl evaluate`` records of a model file)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def load_model(path: str | Path) -> Any:
+    """The Stable-Baselines3 model saved at ``path`` (``model.save``), on the CPU; ValueError in
+    one line for a file that is not one, or whose policy no algorithm of ``ALGORITHMS`` has."""
+    import stable_baselines3
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    try:
+        data, _, _ = load_from_zip_file(path, device="cpu")
+    except Exception as error:  # noqa: BLE001 - a file that is not a model fails in many ways
+        raise ValueError(f"{path}: not a Stable-Baselines3 model file ({type(error).__name__}: {error})") from None
+    policy_class = (data or {}).get("policy_class")
+    for name in ALGORITHMS:
+        algorithm = getattr(stable_baselines3, name)
+        if policy_class in algorithm.policy_aliases.values():
+            return algorithm.load(path, device="cpu")
+    raise ValueError(f"{path}: its policy {policy_class!r} is none of Stable-Baselines3's {', '.join(ALGORITHMS)}")
+
+
+def model_policy(
+    model: Any, domain: str, task: str, task_kwargs: dict[str, Any] | None, observation_size: int
+) -> Callable[[np.ndarray], np.ndarray]:
+    """``model``'s deterministic actions as a tatl policy of ``domain/task``: states (N, d) ->
+    actuator values (N, m). Its observations must be ``observation_size`` long (the state, or the
+    state and context); its action space one of the ids' (:func:`tatl_mj.gym.action_scale`).
+    ValueError in one line before any episode otherwise."""
+    from tatl_mj import suite
+
+    shape = tuple(model.observation_space.shape or ())
+    if shape != (observation_size,):
+        raise ValueError(
+            f"the model observes shape {shape}, but {domain}/{task} gives ({observation_size},) here "
+            "(--context-in-observation appends the condition's context to the state)"
+        )
+    space = model.action_space
+    if not isinstance(space, gymnasium.spaces.Box):
+        raise ValueError(f"the model acts in {space}; {domain}/{task} takes a Box of actuator values")
+    env = suite.load(domain, task, task_kwargs=task_kwargs)
+    scale = tatl_gym.action_scale(space, tatl_gym.actuator_limit(env, f"{domain}/{task}"))
+
+    def decide(states: np.ndarray) -> np.ndarray:
+        actions, _ = model.predict(np.asarray(states, dtype=np.float64), deterministic=True)
+        return tatl_gym.batch_actuator_values(actions, space, scale)
+
+    return decide

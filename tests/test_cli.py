@@ -192,6 +192,7 @@ def test_every_option_and_subcommand_has_help_text():
         "tatl",
         "tatl list",
         "tatl run",
+        "tatl evaluate",
         "tatl plot",
         "tatl compare",
         "tatl reference",

@@ -1,10 +1,10 @@
-"""The `tatl` command: list, run, plot, compare, reference, export, render, bench.
+"""The `tatl` command: list, run, evaluate, plot, compare, reference, export, render, bench.
 
 No GL library is loaded until a frame is drawn (``tatl_mj.gl``); `render` and
 `bench` check the backend first, so every subcommand works on a headless machine.
 
 This module is the parser and ``main``; each command's options and handler sit together in
-their own module: ``tasks`` (list), ``run``, ``folders`` (plot, export), ``compare``,
+their own module: ``tasks`` (list), ``run``, ``evaluate``, ``folders`` (plot, export), ``compare``,
 ``reference``, ``render`` (render, bench), over ``options`` (what their options share) and
 ``signals`` (stopping on SIGINT or SIGTERM).
 """
@@ -15,7 +15,7 @@ import argparse
 import os
 import sys
 
-from tatl_mj.cli import compare, folders, reference, render, run, tasks
+from tatl_mj.cli import compare, evaluate, folders, reference, render, run, tasks
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     tasks.add_list(sub)
     run.add_run(sub)
+    evaluate.add_evaluate(sub)
     folders.add_plot(sub)
     compare.add_compare(sub)
     reference.add_reference(sub)

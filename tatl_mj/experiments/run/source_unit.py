@@ -86,8 +86,10 @@ def _learn_mapping(
     return mappings.MAPPINGS[spec.mapping.kind](inputs)
 
 
-def _random_return(spec: ExperimentSpec, preset: Preset, seed: int) -> float:
-    """The uniformly random policy's mean return from the experiment's evaluation starts."""
+def random_return(spec: ExperimentSpec, preset: Preset, seed: int) -> float:
+    """The uniformly random policy's mean return from the experiment's evaluation starts: what
+    every method's (and ``tatl evaluate``'s) normalised score of this seed is measured from; it
+    needs no source work."""
     policy = random_policy(spec.target, derive_seed(seed, "random-policy"))
     returns, _ = target_returns(spec, preset, policy, derive_seed(seed, spec.stream_name, "evaluation"))
     return float(np.mean(returns))
@@ -120,13 +122,13 @@ def learn_source(
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    random_return = _random_return(spec, preset, seed) if shared is None else shared.random_return
+    random_mean = random_return(spec, preset, seed) if shared is None else shared.random_return
     timings["random_evaluation_s"] = time.perf_counter() - start
     return SourceArtifacts(
         source_q=source_q,
         mapping=mapping,
         target_stream=target_stream,
-        random_return=random_return,
+        random_return=random_mean,
         mapping_target_samples=n_map_target,
         mapping_source_samples=n_map_source,
         source_samples=source_samples,
