@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tatl_mj import suite
-from tatl_mj.suite import bicycle
+from tatl_mj.suite import bicycle, bicycle_stability
 
 # Meijaard et al. (2007), eq. (A 2)-(A 5): the benchmark's linearised equations
 # M q'' + v C1 q' + (g K0 + v^2 K2) q = f for q = [roll, steer] (their signs).
@@ -402,7 +402,7 @@ def test_rollout_reproduces_the_environment():
 
 @pytest.mark.parametrize("speed", [2.778, 4.0, 5.0])
 def test_lateral_eigenvalues_match_the_benchmark(speed):
-    ours = bicycle.lateral_eigenvalues(speed)
+    ours = bicycle_stability.lateral_eigenvalues(speed)
     bench = benchmark_eigenvalues(speed)
     for target in bench:
         if abs(target) < 0.5 and abs(target.imag) < 1e-9:
@@ -414,15 +414,15 @@ def test_lateral_eigenvalues_match_the_benchmark(speed):
 
 
 def test_stability_window_matches_the_benchmark():
-    weave, capsize = bicycle.stability_window()
+    weave, capsize = bicycle_stability.stability_window()
     assert weave == pytest.approx(BENCH_WEAVE_SPEED, rel=0.02)  # measured 4.341 (+1.1 %)
     assert capsize == pytest.approx(BENCH_CAPSIZE_SPEED, rel=0.01)  # measured 6.029 (+0.08 %)
 
 
 def test_wider_tyres_lower_the_capsize_speed():
     """A rounder tyre crown (radius b^2 / r) destabilises the capsize mode."""
-    knife = bicycle.capsize_growth(5.9)
-    wide = bicycle.capsize_growth(5.9, bicycle.BicycleParams(tyre_half_width=0.03))
+    knife = bicycle_stability.capsize_growth(5.9)
+    wide = bicycle_stability.capsize_growth(5.9, bicycle.BicycleParams(tyre_half_width=0.03))
     assert knife < 0.0 < wide
 
 

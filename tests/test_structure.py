@@ -14,6 +14,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "tatl_mj"
 MAX_LINES = 80
+MAX_MODULE_LINES = 600
 
 LONG_FUNCTIONS = {}
 """Functions over MAX_LINES, by ``module:qualname``, each with why it is left for now."""
@@ -119,6 +120,22 @@ def test_no_function_is_longer_than_80_lines():
     assert not unlisted, f"functions over {MAX_LINES} lines: {unlisted}"
     split = sorted(set(LONG_FUNCTIONS) - set(long))
     assert not split, f"now at most {MAX_LINES} lines: remove them from LONG_FUNCTIONS: {split}"
+
+
+def test_no_module_is_longer_than_600_lines():
+    files = sorted(PACKAGE.rglob("*.py"))
+    long = {
+        str(p.relative_to(PACKAGE)): n
+        for p in files
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
+def test_a_module_and_a_package_never_share_a_name():
+    # tatl_mj/x.py beside tatl_mj/x/: Python imports the package and the file is dead weight.
+    clash = [str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if p.with_suffix("").is_dir()]
+    assert not clash, f"a module beside a package of its name: {clash}"
 
 
 def test_every_module_is_on_a_floor_and_imports_downward():

@@ -54,11 +54,15 @@ class Visit:
     random: Any = None
 
     def __post_init__(self) -> None:
-        state = np.array(self.state, dtype=np.float64).ravel()
+        # Checked, not converted: visit_of gives the state row MuJoCo wrote.
+        state = self.state
+        if not (isinstance(state, np.ndarray) and state.dtype == np.float64 and state.ndim == 1):
+            raise ValueError(f"Visit.state must be a 1-D float64 array (mj_getState's row), got {state!r:.60}")
         if not np.all(np.isfinite(state)):
             raise ValueError("Visit.state must be finite")
-        object.__setattr__(self, "state", state)
-        object.__setattr__(self, "step", integer("Visit", "step", self.step, 0))
+        if type(self.step) is not int:
+            raise ValueError(f"Visit.step must be an int, got {self.step!r}")
+        integer("Visit", "step", self.step, 0)
 
 
 def visit_of(physics: Any, step: int, random: Any = None) -> Visit:
