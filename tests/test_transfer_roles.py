@@ -22,13 +22,22 @@ SPECS = sorted([*ROOT.glob("tasks/*.toml"), *ROOT.glob("tasks/variants/*.toml"),
 # function at states spread over its reset box (apprentice-fqi) or at its apprentice's predicted
 # rollouts (ta-tl's Algorithm 2, on by default), the target's true model or its simulator stepped
 # from a chosen state (the oracles).
-SOURCE_FREE = {"rl", "rl-reset", "rl-online", "apprentice-fqi", "apprentice-upright", "replan-no-source"}
+SOURCE_FREE = {
+    "rl",
+    "rl-reset",
+    "rl-online",
+    "apprentice-fqi",
+    "apprentice-fqi-samples",
+    "apprentice-upright",
+    "replan-no-source",
+}
 BASELINES = {"uma-tl", "rl", "rl-reset", "rl-online", "uma-tl-reset"}
 PRIVILEGED = {"rl-reset", "uma-tl-reset", "apprentice-fqi", "ta-tl", "ta-tl-oracle", "ta-tl-h-oracle"}
 ABLATION_OF = {
     "rl": ("uma-tl", "uma-tl-prior"),
     "rl-reset": ("uma-tl-reset",),
     "apprentice-fqi": ("ta-tl",),
+    "apprentice-fqi-samples": ("ta-tl",),
     "apprentice-upright": ("ta-tl-h",),
     "replan-no-source": ("ta-tl", "ta-tl-replan", "ta-tl-replan-protocol"),
 }

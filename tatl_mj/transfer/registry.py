@@ -23,6 +23,7 @@ from tatl_mj.transfer.methods.horizon import HorizonTATL
 from tatl_mj.transfer.methods.model_based import ApprenticeFQI
 from tatl_mj.transfer.methods.projected import ProjectedSource
 from tatl_mj.transfer.methods.replan import OneStepOracle, ReplanTATL
+from tatl_mj.transfer.methods.sample_model import ApprenticeFQISamples
 from tatl_mj.transfer.methods.target_fqi import RL, UMATL, UMATLPrior
 from tatl_mj.transfer.methods.tatl import TATL
 from tatl_mj.transfer.roles import PAIR_KEYS, VARIANT_KEY, base_of, plugin_path
@@ -40,6 +41,8 @@ METHODS: dict[str, Callable[..., TransferMethod]] = {
     "uma-tl-reset": functools.partial(UMATL, data="reset"),
     "uma-tl-prior": UMATLPrior,
     "apprentice-fqi": ApprenticeFQI,
+    # The same apprentice without the source or any privilege: only the counted samples.
+    "apprentice-fqi-samples": ApprenticeFQISamples,
     # Extensions, each named apart from the paper's rule, and the ablations that credit them.
     "ta-tl-h": HorizonTATL,
     "apprentice-upright": functools.partial(HorizonTATL, reference="zero"),

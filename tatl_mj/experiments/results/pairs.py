@@ -4,9 +4,9 @@ A pair is (method, other, role): a transfer method against its source-free **abl
 itself on a **placebo** source, or any method against the experiment's frozen **best baseline**.
 The pairs are declared by the spec, not by which methods a run happens to hold:
 
-- ablation: a method table's ``ablation = "NAME"`` key, else the method the spec lists first
-  whose ``ablation_of`` names the built-in (or plug-in) the table builds, and the others of
-  that one's built-in: the built-in's own table where the spec lists it, else every variant of it;
+- ablation: a method table's ``ablation = "NAME"`` key, else the methods whose ``ablation_of``
+  names the built-in (or plug-in) the table builds: every built-in's own table among them, else,
+  where the spec lists only variants, every variant of the first one's built-in;
 - placebo: a method table's ``placebo = "NAME"`` key, else the table of the same built-in
   whose method declares ``source = "placebo"`` and whose settings are otherwise the same;
 - best baseline: the spec's ``best_baseline = {final = "...", efficiency = "..."}``, chosen on
@@ -76,10 +76,11 @@ def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
 
     A table's ``ablation`` key names it; otherwise a method that uses the source, on its trained
     source, pairs with the methods that declare themselves the ablation of its built-in
-    (``ablation_of``; a variant, ``method = "ta-tl"``, pairs as its built-in): of those, the
-    first the spec lists names a built-in, whose own table is the ablation where the spec lists
-    it, else each variant of it. A placebo is itself an ablation, judged against its trained
-    method only.
+    (``ablation_of``; a variant, ``method = "ta-tl"``, pairs as its built-in): of those, every
+    built-in's own table the spec lists (``ta-tl`` against both ``apprentice-fqi`` and
+    ``apprentice-fqi-samples`` where the spec lists both), else, where it lists only variants,
+    each variant of the first one's built-in. A placebo is itself an ablation, judged against
+    its trained method only.
     """
     bases = {name: _base(name, settings) for name, settings in spec_methods.items()}
     held = roles_of(spec_methods)
@@ -92,11 +93,12 @@ def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
         if held[name].source == "placebo" or not held[name].uses_source or b is None:
             continue
         found = [other for other in bases if other != name and b in held[other].ablation_of]
-        if found:
-            first = bases[found[0]]
-            # The built-in itself where the spec lists it, else every variant of it.
-            group = [first] if first in found else [other for other in found if bases[other] == first]
-            pairs.extend((name, other) for other in group)
+        # Every built-in's own table among them (apprentice-fqi and apprentice-fqi-samples for
+        # ta-tl), else every variant of the first one's built-in.
+        group = [other for other in found if other == bases[other]]
+        if found and not group:
+            group = [other for other in found if bases[other] == bases[found[0]]]
+        pairs.extend((name, other) for other in group)
     return pairs
 
 
