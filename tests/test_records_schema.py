@@ -219,3 +219,25 @@ def test_a_source_cache_answers_alike_with_or_without_its_derived_values():
     for answer, without, within in zip(answers, unused, used):
         np.testing.assert_array_equal(ask(without), answer)
         np.testing.assert_array_equal(ask(within), answer)
+
+
+def test_the_grid_planners_old_word_for_the_shared_stream_is_read_as_shared():
+    # Before one word named the shared random-policy stream the grid planners wrote "stream".
+    unit = {"schema_version": 2, "data": "stream", "curve": [], "final_return": 0.0}
+    assert records.upgrade(unit)["data"] == "shared"
+    assert records.upgrade({**unit, "data": "reset"})["data"] == "reset"
+    summary = {
+        "schema_version": 2,
+        "experiments": {"grid": {"methods": {"r": {"data": "stream"}, "s": {"data": "online"}}}},
+    }
+    methods = records.upgrade(summary)["experiments"]["grid"]["methods"]
+    assert (methods["r"]["data"], methods["s"]["data"]) == ("shared", "online")
+
+
+def test_the_grid_planner_learns_from_the_shared_stream_under_that_word():
+    from tatl_mj.transfer import registry
+
+    assert registry.build("ta-tl-replan").data == "shared"
+    assert registry.build("replan-no-source").data == "shared"
+    with pytest.raises(ValueError, match="data"):
+        registry.resolve("x", {"method": "ta-tl-replan", "data": "stream"})

@@ -78,8 +78,8 @@ def _preamble(summary: Summary) -> str:
         f"(without a reference: {summary.threshold_fraction:.0%} of the best method's gap); "
         "transitions to it: those counted at the smallest budget from which a seed stays at or above it. Data: "
         "`shared` (the random-policy stream every method shares), `reset` (privileged: one-step transitions from "
-        "states spread over the target's box), `online` (epsilon-greedy episodes), `stream`/`source-policy` "
-        "(the grid planner's)." + _kernels_sentence(summary)
+        "states spread over the target's box), `online` (epsilon-greedy episodes), `source-policy` "
+        "(the grid planner's run of the projected source policy, the paper's protocol)." + _kernels_sentence(summary)
     )
 
 

@@ -44,8 +44,12 @@ point of a method's curve counts ``rollout_transitions``, the real-target transi
 of policy rollouts charged at that budget (Algorithm 2's U_M rollouts), so that
 ``target_transitions - rollout_transitions`` is the paper's accounting; and every unit
 record names its tasks' dynamics versions (``dynamics``: ``{"domain/task": N}``)."""
-STREAM_DATA = ("shared", "stream")
-"""``data`` settings under which a method learns from the shared stream (counted by ``samples_used``)."""
+SHARED_DATA = "shared"
+"""The ``data`` setting of a method that learns from the shared random-policy stream (counted by
+``samples_used``)."""
+RENAMED_DATA = {"stream": SHARED_DATA}
+"""Older records' words for a ``data`` protocol, by today's: the grid planner said ``"stream"`` for the
+shared stream until one word named it (read as ``"shared"`` by :func:`upgrade`)."""
 UNKNOWN_KERNELS = "unknown"
 """The ``kernels`` of a schema-1 record older than that field."""
 
@@ -149,7 +153,26 @@ def upgrade(record: Any, where: str | Path = "<record>") -> dict:
             record = _summary_v2(record) if "experiments" in record else _unit_v2(record)
         except (KeyError, TypeError) as error:
             raise RecordError(f"{where}: a schema-1 record without {error}, which no upgrade can derive") from None
-    return record
+    return _data_words(record)
+
+
+def _data_words(record: dict) -> dict:
+    """``record`` with today's word for each ``data`` protocol (:data:`RENAMED_DATA`)."""
+    if "experiments" in record:
+        renamed = {}
+        for name, experiment in record["experiments"].items():
+            methods = experiment.get("methods") or {}
+            if any(m.get("data") in RENAMED_DATA for m in methods.values()):
+                methods = {k: _data_word(m) for k, m in methods.items()}
+                experiment = {**experiment, "methods": methods}
+            renamed[name] = experiment
+        return {**record, "experiments": renamed}
+    return _data_word(record)
+
+
+def _data_word(entry: dict) -> dict:
+    data = entry.get("data")
+    return {**entry, "data": RENAMED_DATA[data]} if data in RENAMED_DATA else entry
 
 
 def _unit_v2(record: dict) -> dict:
@@ -164,7 +187,7 @@ def _unit_v2(record: dict) -> dict:
         if "steps" not in p:  # per-episode lengths (survival) cannot be made up
             raise KeyError("steps")
         counted = p.get("target_transitions", p["samples"])  # before counting: the budget
-        rollouts = counted - p["samples_used"] if data in STREAM_DATA else 0
+        rollouts = counted - p["samples_used"] if data in (SHARED_DATA, *RENAMED_DATA) else 0
         return {**p, "target_transitions": counted, "rollout_transitions": rollouts}
 
     return {**out, "data": data, "curve": [point(p) for p in record["curve"]]}

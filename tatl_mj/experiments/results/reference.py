@@ -35,6 +35,7 @@ from tatl_mj.experiments.results.records import (
     RunDirectory,
     read_json,
     read_record,
+    upgrade,
     write_atomic,
     write_json,
 )
@@ -113,7 +114,8 @@ class ReferenceSet:
         """(experiment, seed, unit, record) for every record of the set, sources included."""
         for line in self._read(RECORDS).splitlines():
             entry = json.loads(line)
-            yield entry["experiment"], entry["seed"], entry["unit"], entry["record"]
+            where = f"{self.folder / RECORDS}: {entry['experiment']}/seed{entry['seed']}/{entry['unit']}"
+            yield entry["experiment"], entry["seed"], entry["unit"], upgrade(entry["record"], where)
 
     def _read(self, name: str) -> bytes:
         path = self.folder / name

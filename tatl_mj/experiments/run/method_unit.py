@@ -25,7 +25,7 @@ from typing import Any, Callable
 import numpy as np
 
 from tatl_mj.description import TaskDescription
-from tatl_mj.experiments.results.records import STREAM_DATA
+from tatl_mj.experiments.results.records import SHARED_DATA
 from tatl_mj.experiments.run.determinism import derive_seed
 from tatl_mj.experiments.run.evaluation import evaluate_curve, steadiness
 from tatl_mj.experiments.run.problems import Ledger, transfer_problem
@@ -114,7 +114,7 @@ def _learn_point(
         policy = learn(budget)
     learn_s = time.perf_counter() - start
     used = method.samples_used(policy, budget) if hooks.uses_samples else 0
-    stream = used if hooks.data in STREAM_DATA else 0
+    stream = used if hooks.data == SHARED_DATA else 0
     point = {
         "samples": int(budget),
         # Algorithm 2 may stop before the budget: ``samples_used`` is what it kept.

@@ -182,7 +182,7 @@ class ReplanTATL:
 
     Settings: ``gamma`` of the planner; ``source_prior`` (False: the
     ``replan-no-source`` ablation, unvisited pairs stay put with reward 0, so only
-    the apprentice plans); ``prior_scope`` (``PRIOR_SCOPES``); ``data``: ``"stream"``
+    the apprentice plans); ``prior_scope`` (``PRIOR_SCOPES``); ``data``: ``"shared"``
     (the shared random-policy samples, as every method) or ``"source-policy"`` (the
     paper's protocol: the budget is spent running the projected source policy from
     the target's random starts).
@@ -191,14 +191,14 @@ class ReplanTATL:
     gamma: float = 0.95
     source_prior: bool = True
     prior_scope: str = "agreeing-cells"
-    data: str = "stream"
+    data: str = "shared"
     name: str = "ta-tl-replan"
 
     constraints: ClassVar[Constraints] = {
         "gamma": [Interval(float, 0, 1, closed="left")],
         "source_prior": [Boolean()],
         "prior_scope": [Options(*PRIOR_SCOPES)],
-        "data": [Options("stream", "source-policy")],
+        "data": [Options("shared", "source-policy")],
     }
 
     def __post_init__(self) -> None:
