@@ -128,20 +128,20 @@ def test_exact_models_give_fqi_on_the_true_transitions_and_no_reward_error():
     np.testing.assert_array_equal(policy(probe), ACTIONS[reference.greedy(probe)])
 
 
-def test_the_reward_model_learns_a_step_reward_and_its_ends():
-    # The grid's bump depends on the cell and the move, its goal (an end) on the cell reached.
+def _windy_steps(n: int):
+    """The windy grid's description and ``n`` uniformly random one-step transitions of it, drawn
+    from its known model (the test's simulator, never the method's)."""
     target = gridworld.describe("windy")
     next_state, reward, absorbing, cells = target.known_model()
     rng = np.random.default_rng(0)
-    rows, moves = rng.integers(len(cells), size=4000), rng.integers(4, size=4000)
-    data = Transitions(
-        cells[rows],
-        moves,
-        reward[rows, moves],
-        cells[next_state[rows, moves]],
-        absorbing[rows, moves],
-        absorbing[rows, moves],
-    )
+    rows, moves = rng.integers(len(cells), size=n), rng.integers(4, size=n)
+    ends = absorbing[rows, moves]
+    return target, Transitions(cells[rows], moves, reward[rows, moves], cells[next_state[rows, moves]], ends, ends)
+
+
+def test_the_reward_model_learns_a_step_reward_and_its_ends():
+    # The grid's bump depends on the cell and the move, its goal (an end) on the cell reached.
+    target, data = _windy_steps(4000)
     onehot = reward_bases({"kind": "onehot", "n_rows": 10, "n_cols": 10}, 2)
     exact = fit_reward_model(data, onehot, "transition", 4, 1e-9)
     predicted, ends = exact.predict(data.states, data.actions, data.next_states)
@@ -153,18 +153,8 @@ def test_the_reward_model_learns_a_step_reward_and_its_ends():
 
 
 def test_it_learns_the_grid_with_every_privileged_hook_raising():
-    target = gridworld.describe("windy")
-    next_state, reward, absorbing, cells = target.known_model()  # the test's simulator, not the method's
-    rng = np.random.default_rng(0)
-    rows, moves = rng.integers(len(cells), size=3000), rng.integers(4, size=3000)
-    data = Transitions(
-        cells[rows],
-        moves,
-        reward[rows, moves],
-        cells[next_state[rows, moves]],
-        absorbing[rows, moves],
-        absorbing[rows, moves],
-    )
+    target, data = _windy_steps(3000)
+    next_state, _, absorbing, cells = target.known_model()  # the test's simulator, not the method's
     onehot = {"kind": "onehot", "n_rows": 10, "n_cols": 10}
     method = ApprenticeFQISamples(
         apprentice=onehot, apprentice_ridge=1e-3, features=onehot, gamma=0.95, iterations=60,
