@@ -251,3 +251,26 @@ def test_the_preamble_names_the_kernels_that_computed_the_records():
         "Arithmetic kernels: `openblas 0.3.31 Haswell` (12 records), `openblas 0.3.31 SkylakeX` (4 records); "
         "3 older records do not name theirs." in preamble
     )
+
+
+def test_where_the_accountings_part_the_table_names_what_each_paid_before_a_first_policy():
+    import types
+
+    from tatl_mj.experiments.report import tables
+    from tatl_mj.experiments.results.summary_data import Answer, Interval, PairVerdict
+
+    def answer(verdict):
+        return Answer(Interval(0.5, 0.2, 0.8), {"better": 5, "tied": 0, "worse": 5}, verdict)
+
+    exp = types.SimpleNamespace(
+        methods={
+            "ta-tl": types.SimpleNamespace(first_policy={"counted": 300.0, "paper": 100.0}),
+            "apprentice-fqi": types.SimpleNamespace(first_policy={"counted": 100.0, "paper": 100.0}),
+        }
+    )
+    differ = PairVerdict("ta-tl", "apprentice-fqi", "ablation", False, None, answer("worse"), answer("not credited"))
+    assert tables.why_accountings_differ(differ, exp) == (
+        "before a first policy, counted / paper's: `ta-tl` 300 / 100; `apprentice-fqi` 100"
+    )
+    agree = PairVerdict("ta-tl", "apprentice-fqi", "ablation", False, None, answer("worse"), answer("worse"))
+    assert tables.why_accountings_differ(agree, exp) == ""

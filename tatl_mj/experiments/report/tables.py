@@ -209,7 +209,7 @@ def _verdict_rows(exp: Experiment) -> list[str]:
     ]
     marked = privileged(exp.spec_methods)
     for pair in pairs:
-        final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
+        final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair, exp)
         difference = "-" if pair.final is None else interval_text(pair.final.median_difference, "+.2f")
         other = against(pair, marked)
         if pair.parents:
@@ -337,14 +337,31 @@ def credit_table(name: str, cells: list[tuple[dict, Experiment]]) -> str:
 # --- the headline tables --------------------------------------------------------------
 
 
-def _answer_cells(pair: PairVerdict) -> tuple[str, str, str, str, str]:
+def _answer_cells(pair: PairVerdict, exp: Experiment) -> tuple[str, str, str, str, str]:
     """A pair's final P and verdict, efficiency P and verdict, and the paper-accounting verdict
-    (without the Holm mark: that question is not in the family)."""
+    (without the Holm mark: that question is not in the family), with :func:`why_accountings_differ`."""
     words = verdicts.words(pair.role, marked=True)
     final_p, final_v = answer_text(pair.final, words)
     efficiency_p, efficiency_v = answer_text(pair.efficiency, words)
     paper_v = answer_text(pair.efficiency_paper, words)[1].rstrip(HOLM_MARK)
-    return final_p, final_v, efficiency_p, efficiency_v, paper_v
+    why = why_accountings_differ(pair, exp)
+    return final_p, final_v, efficiency_p, efficiency_v, paper_v + (f" ({why})" if why else "")
+
+
+def why_accountings_differ(pair: PairVerdict, exp: Experiment) -> str:
+    """Where the efficiency verdict on counted transitions differs from the one on the paper's
+    accounting, what each method paid before its first policy (median over seeds, counted / the
+    paper's), which is where the two accountings part: Algorithm 2's U_M rollouts; else ""."""
+    counted, paper = pair.efficiency, pair.efficiency_paper
+    if counted is None or paper is None or counted.verdict == paper.verdict:
+        return ""
+    paid = []
+    for name in (pair.method, pair.other):
+        first = exp.methods[name].first_policy if name in exp.methods else None
+        if first:
+            mine, theirs = first.get(verdicts.COUNTED), first.get(verdicts.PAPER)
+            paid.append(f"`{name}` {samples_text(mine)}" + (f" / {samples_text(theirs)}" if theirs != mine else ""))
+    return "before a first policy, counted / paper's: " + "; ".join(paid) if paid else ""
 
 
 def verdict_table(
@@ -373,7 +390,7 @@ def verdict_table(
             answers = (pair.answer(q) for q in verdicts.QUESTIONS)
             if credited_only and not any(a is not None and a.verdict == verdicts.CREDITED for a in answers):
                 continue
-            final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair)
+            final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair, exp)
             mine, theirs = (exp.methods[m].final_iqm for m in (pair.method, pair.other))
             lines.append(
                 f"| {title} | {method_cell(pair.method, marked)} | {against(pair, marked)} | {final_p} "
