@@ -13,10 +13,11 @@ controls of random actions from the action set under its context.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
+
+from tatl_mj.sampling.timing import timed_rollouts
 
 RANGES: dict[str, dict[str, tuple[float, float]]] = {
     # The conditions the sweeps vary (tasks/sweeps/*.toml), and the masses and lengths about them.
@@ -46,7 +47,6 @@ def time_rollout_contexts(
 ) -> dict[str, Any]:
     """Raw ``mujoco.rollout`` over the per-env models of a vector env with ``mode``'s contexts."""
     import mujoco
-    import mujoco.rollout
 
     from tatl_mj import suite, vector
 
@@ -65,21 +65,6 @@ def time_rollout_contexts(
         controls.append(env.task.controls(actions, env.task.random))
     table = np.stack(controls)  # (env, action, nu)
     n_sub = int(round(env.control_timestep() / env.physics.timestep()))
-    rng = np.random.default_rng(seed)
-    datas = [mujoco.MjData(models[0]) for _ in range(max(threads, 1))]
-    with mujoco.rollout.Rollout(nthread=threads) as pool:
-
-        def run(n_control: int) -> float:
-            picks = rng.integers(len(actions), size=(num_envs, n_control))
-            ctrl = np.repeat(table[np.arange(num_envs)[:, None], picks], n_sub, axis=1)
-            begin = time.perf_counter()
-            pool.rollout(models, datas, starts, ctrl)
-            return time.perf_counter() - begin
-
-        pilot = 10
-        rate = num_envs * pilot / run(pilot)
-        n_control = max(pilot, int(rate * seconds / num_envs))
-        elapsed = run(n_control)
+    timed = timed_rollouts(models, starts, table, n_sub, seconds, threads, np.random.default_rng(seed))
     envs.close()
-    steps = num_envs * n_control
-    return {"steps": steps, "seconds": elapsed, "steps_per_s": steps / elapsed, "substeps": n_sub, "contexts": mode}
+    return {**timed, "contexts": mode}
