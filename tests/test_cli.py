@@ -319,14 +319,14 @@ def test_seeds_default_to_the_presets_own_and_must_agree(tmp_path):
 
     paper = [spec_mod.load_spec(ROOT / "tasks" / name) for name in ("ip_to_flipped_ip.toml", "mc_to_ip.toml")]
     args = argparse.Namespace(preset="paper", seeds=None, first_seed=None)
-    assert run_cli._seeds(args, paper) == range(100, 110)  # held out: tuning used seeds 0-4
-    assert run_cli._seeds(argparse.Namespace(preset="paper", seeds=3, first_seed=None), paper) == range(100, 103)
+    assert run_cli._seeds(args, paper) == range(200, 210)  # held out: tuning used seeds 0-9
+    assert run_cli._seeds(argparse.Namespace(preset="paper", seeds=3, first_seed=None), paper) == range(200, 203)
     assert run_cli._seeds(argparse.Namespace(preset="smoke", seeds=None, first_seed=None), paper) == range(0, 2)
     table = tomllib.loads((ROOT / "tasks" / "mc_to_ip.toml").read_text())
-    table["presets"]["paper"]["first_seed"] = 200
+    table["presets"]["paper"]["first_seed"] = 300
     other = spec_mod.parse_spec(table, "mine.toml")
     assert run_cli._seeds(args, [paper[0], other]) == (
-        "the specs' presets.paper.first_seed differ ([100, 200]): give --first-seed"
+        "the specs' presets.paper.first_seed differ ([200, 300]): give --first-seed"
     )
     assert run_cli._seeds(argparse.Namespace(preset="paper", seeds=None, first_seed=7), [paper[0], other]) == range(
         7, 17

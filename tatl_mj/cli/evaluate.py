@@ -38,7 +38,7 @@ def add_evaluate(sub: Any) -> None:
         "--first-seed",
         type=options.int_at_least(0),
         default=None,
-        help="seeds are FIRST_SEED .. FIRST_SEED + SEEDS - 1 (default: the preset's `first_seed`; paper 100, held out)",
+        help="seeds are FIRST_SEED .. FIRST_SEED + SEEDS - 1 (default: the preset's `first_seed`; paper 200, held out)",
     )
     p.add_argument("--out", type=options.non_empty, required=True, help="output folder; rerunning resumes it")
     p.add_argument(

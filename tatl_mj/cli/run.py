@@ -25,7 +25,7 @@ def add_run(sub: Any) -> None:
         type=options.int_at_least(0),
         default=None,
         help="seeds run are FIRST_SEED .. FIRST_SEED + SEEDS - 1, >= 0 (default: the preset's "
-        "`first_seed`; smoke 0, paper 100: held out, tuning used 0-4)",
+        "`first_seed`; smoke 0, paper 200: held out, tuning used 0-9; 100-109 are retired as seen)",
     )
     p.add_argument("--out", type=options.non_empty, required=True, help="output folder; rerunning resumes it")
     p.add_argument("--workers", type=options.int_at_least(1), default=2, help="parallel work units, >= 1 (default: 2)")
