@@ -185,6 +185,8 @@ def test_the_verdict_tables_label_every_privileged_side():
     marked = tables.privileged(methods)
     assert marked == {"ta-tl", "apprentice-fqi"}
     pair = PairVerdict("ta-tl-no-alg2", "apprentice-fqi", "ablation", False, None, None, None)
-    assert tables.against(pair, marked) == "`apprentice-fqi` (source-free, privileged)"
+    assert tables.against(pair, marked) == (
+        "`apprentice-fqi` (source-free, privileged: does not credit or discredit transfer)"
+    )
     assert tables.method_cell("ta-tl-no-alg2", marked) == "`ta-tl-no-alg2`"
     assert tables.method_cell("ta-tl", marked) == "`ta-tl` (privileged)"
