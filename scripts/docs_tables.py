@@ -29,7 +29,7 @@ def blocks(paper: Summary, sweeps: Summary) -> dict[tuple[str, str], str]:
     credit = "\n".join(tables.credit_table(name, cells) for name, cells in credit_maps.sweeps(sweeps).items())
     return {
         ("README.md", "paper-vs-here"): tables.paper_table(paper),
-        ("README.md", "credit"): tables.verdict_table(paper, methods=("ta-tl",)),
+        ("README.md", "credit"): tables.verdict_table(paper, methods=tables.READINGS),
         ("docs/results-paper.md", "credited-anywhere"): tables.verdict_table(paper, credited_only=True),
         ("docs/results-paper.md", "results"): tables.table(paper) + "\n" + tables.aggregate_table(paper),
         ("docs/credit.md", "credit-tables"): credit,

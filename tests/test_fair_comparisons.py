@@ -295,6 +295,11 @@ def test_every_spec_lists_the_fair_baselines_and_ablations(path):
         for name in ("rl-reset", "rl-online"):
             assert methods[name][key] == value
     assert methods["ta-tl-continuous"] == {**methods["ta-tl"], "method": "ta-tl", "actions": "continuous"}
+    # Algorithm 2's two-sided relative gap, a labelled variant at ta-tl's settings (zeta not tuned).
+    assert ("ta-tl-relative" in methods) == ("ta-tl-no-alg2" in methods)
+    if "ta-tl-relative" in methods:
+        assert methods["ta-tl-relative"] == {**methods["ta-tl"], "method": "ta-tl", "gap": "relative"}
+        assert methods["ta-tl-relative"]["zeta"] == 0.1
 
 
 def test_new_methods_are_registered_and_source_free_where_they_say():

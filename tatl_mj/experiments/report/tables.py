@@ -22,6 +22,16 @@ from tatl_mj.experiments.results.summary_data import Answer, Experiment, Interva
 PAPER_METHODS = ("ta-tl", "uma-tl", "rl")
 """The paper's three methods, on its protocol (the shared random-policy stream)."""
 
+READINGS = ("ta-tl", "ta-tl-continuous")
+"""The paper's two readings of TA-TL's action, of equal standing, each a row of the headline tables
+(``paper_table``, the README's credit table): ``ta-tl`` snaps it to the target's three discrete
+actions, the set every comparator chooses from; ``ta-tl-continuous`` clips the torque at the
+actuator's limit, so it has more actions than its comparators (docs/protocol.md, "Departures made
+equal"). A credit headline, a sentence or count saying where transfer is credited, reads
+``CREDIT_READING``, the same-actions row."""
+CREDIT_READING = READINGS[0]
+READING_LABELS = {"ta-tl": "three target actions", "ta-tl-continuous": "torque clipped at the limit"}
+
 VERDICT_WORDS = verdicts.words(verdicts.ABLATION, marked=True)
 BASELINE_WORDS = verdicts.words(verdicts.BEST_BASELINE, marked=True)
 ROLE_WORDS = {verdicts.ABLATION: "source-free", verdicts.PLACEBO: "placebo", verdicts.BEST_BASELINE: "best baseline"}
@@ -36,14 +46,63 @@ def privileged(spec_methods: Mapping[str, object]) -> set[str]:
 
 
 def against(pair: PairVerdict, marked: set[str]) -> str:
-    """A pair's other side with its role, and ``privileged`` where it is."""
+    """A pair's other side with its role, and ``privileged`` where it is (with :data:`NOT_CREDIT`
+    where the verdict against it does not credit transfer, :func:`credits`)."""
     words = [ROLE_WORDS[pair.role], *([PRIVILEGED] if pair.other in marked else [])]
-    return f"`{pair.other}` ({', '.join(words)})"
+    note = "" if credits(pair, marked) else f": {NOT_CREDIT}"
+    return f"`{pair.other}` ({', '.join(words)}{note})"
 
 
 def method_cell(name: str, marked: set[str]) -> str:
     """A pair's method, with ``(privileged)`` where it is."""
     return f"`{name}` ({PRIVILEGED})" if name in marked else f"`{name}`"
+
+
+NOT_CREDIT = "does not credit or discredit transfer"
+"""Said once per row, beside the comparator, where a pair does not credit (:func:`credits`)."""
+INFORMATION = "information"
+"""Beside each verdict of such a pair: printed as information, by the unchanged rule."""
+MORE_ACTIONS = "more actions than its comparator"
+
+
+def credits(pair: PairVerdict, marked: set[str]) -> bool:
+    """Whether a pair's verdict credits (or discredits) transfer: not where the comparator is
+    privileged (it has target resources a robot lacks, more than a transfer method needs), unless
+    it is the method's own placebo, the same method with the same resources. The verdict of a pair
+    that does not credit is printed as information (:data:`NOT_CREDIT`); the rule is unchanged."""
+    return pair.role == verdicts.PLACEBO or pair.other not in marked
+
+
+def more_actions(pair: PairVerdict, spec_methods: Mapping[str, object]) -> bool:
+    """Whether the pair's method chooses continuous actions and its comparator does not (the
+    comparators choose from the target's discrete set): ``ta-tl-continuous``'s pairs."""
+
+    def continuous(name: str) -> bool:
+        table = spec_methods.get(name)
+        return isinstance(table, Mapping) and table.get("actions") == "continuous"
+
+    return continuous(pair.method) and not continuous(pair.other)
+
+
+def _row_order(pair: PairVerdict, marked: set[str]) -> tuple[int, bool]:
+    """Within a method's rows: source-free comparators first, each non-privileged one before the
+    privileged one beside it, then the placebo, then the best baseline."""
+    roles = (verdicts.ABLATION, verdicts.PLACEBO, verdicts.BEST_BASELINE)
+    return (roles.index(pair.role) if pair.role in roles else len(roles), pair.other in marked)
+
+
+def ordered(pairs: Sequence[PairVerdict], marked: set[str], methods: Sequence[str] = ()) -> list[PairVerdict]:
+    """A table's pairs grouped by method (``methods``' order first, then the declared order), each
+    method's rows in :func:`_row_order`."""
+    first: dict[str, int] = {}
+    for pair in pairs:
+        first.setdefault(pair.method, len(first))
+    rank = {m: i for i, m in enumerate(methods)}
+
+    def key(pair: PairVerdict) -> tuple[int, int, tuple[int, bool]]:
+        return rank.get(pair.method, len(rank)), first[pair.method], _row_order(pair, marked)
+
+    return sorted(pairs, key=key)
 
 
 HOLM_MARK = "†"
@@ -140,6 +199,7 @@ def _experiment_section(summary: Summary, exp: Experiment) -> list[str]:
         lines += ["Transfer against its ablation without the source:", ""]
         lines += [f"- {v}" for v in sentences] + [""]
     lines += _method_rows(exp, comparison)
+    lines += apprentice_rows(exp, comparison)
     lines += _capped_lines(exp)
     return lines + _footnote(summary, exp, comparison)
 
@@ -180,6 +240,45 @@ def _method_rows(exp: Experiment, comparison: Comparison) -> list[str]:
     return lines
 
 
+def apprentice_samples(exp: Experiment, method: str, seeds: Sequence[int]) -> list[float] | None:
+    """Per budget, the median over ``seeds`` of the shared samples ``method``'s apprentice was
+    fitted on (``samples_used``: those Algorithm 2 kept); None in a summary older than them."""
+    data = exp.methods[method]
+    used = data.curve.samples_used
+    if used is None or not seeds:
+        return None
+    rows = np.asarray(used, dtype=float)[data.rows(list(seeds))]
+    return [float(v) for v in np.median(rows, axis=0)]
+
+
+def apprentice_rows(exp: Experiment, comparison: Comparison) -> list[str]:
+    """A small table under the method table: per TA-TL method (every table building a ``ta-tl``
+    method), the apprentice's samples at each budget, median over the compared seeds; nothing
+    where no TA-TL method is compared or the summary is older than the samples."""
+    shown = []
+    for r in comparison.methods:
+        settings = exp.spec_methods.get(r.method)
+        base = (settings or {}).get("method", r.method) if isinstance(settings, Mapping) else r.method
+        medians = apprentice_samples(exp, r.method, r.seeds) if str(base).startswith("ta-tl") else None
+        if medians is not None:
+            shown.append((r.method, medians))
+    if not shown:
+        return []
+    budgets = exp.methods[shown[0][0]].curve.samples
+    lines = [
+        "",
+        "Samples the apprentice was fitted on (median over the compared seeds; Algorithm 2 may stop "
+        "before the budget), per budget:",
+        "",
+        "| method | " + " | ".join(samples_text(b) for b in budgets) + " |",
+        "|---" * (len(budgets) + 1) + "|",
+    ]
+    for method, medians in shown:
+        cells = (f"{v:,.0f}" if v == round(v) else f"{v:,.1f}" for v in medians)  # a median of an even count
+        lines.append(f"| {method_label(method)} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def answer_text(answer: Answer | None, words: dict[str, str] = VERDICT_WORDS) -> tuple[str, str]:
     """``(P [CI] (better/tied/worse), verdict)`` of one question of a pair, "-" where not asked."""
     if answer is None:
@@ -208,7 +307,7 @@ def _verdict_rows(exp: Experiment) -> list[str]:
         "|---|---|---|---|---|---|---|---|",
     ]
     marked = privileged(exp.spec_methods)
-    for pair in pairs:
+    for pair in ordered(pairs, marked, READINGS):
         final_p, final_v, efficiency_p, efficiency_v, paper_v = _answer_cells(pair, exp)
         difference = "-" if pair.final is None else interval_text(pair.final.median_difference, "+.2f")
         other = against(pair, marked)
@@ -345,7 +444,16 @@ def _answer_cells(pair: PairVerdict, exp: Experiment) -> tuple[str, str, str, st
     efficiency_p, efficiency_v = answer_text(pair.efficiency, words)
     paper_v = answer_text(pair.efficiency_paper, words)[1].rstrip(HOLM_MARK)
     why = why_accountings_differ(pair, exp)
-    return final_p, final_v, efficiency_p, efficiency_v, paper_v + (f" ({why})" if why else "")
+    paper_v += f" ({why})" if why else ""
+    notes = []
+    if not credits(pair, privileged(exp.spec_methods)):
+        notes.append(INFORMATION)
+    if more_actions(pair, exp.spec_methods):
+        notes.append(MORE_ACTIONS)
+    if notes:
+        mark = f" ({'; '.join(notes)})"
+        final_v, efficiency_v, paper_v = (v if v == "-" else v + mark for v in (final_v, efficiency_v, paper_v))
+    return final_p, final_v, efficiency_p, efficiency_v, paper_v
 
 
 def why_accountings_differ(pair: PairVerdict, exp: Experiment) -> str:
@@ -373,7 +481,11 @@ def verdict_table(
 ) -> str:
     """One row per declared pair of the given roles whose method starts with ``prefix`` (or is one of
     ``methods``), both questions: the README's credit tables (a variant's pairs that are its
-    parent's are left out). ``credited_only``: only pairs credited (or better) on either question."""
+    parent's are left out). ``credited_only``: only pairs credited (or better) on either question.
+    Per experiment the rows go by method (``methods``' order), each method's non-privileged
+    comparator before the privileged one beside it; a verdict against a privileged comparator is
+    printed as information (:func:`credits`), and one of a reading with more actions than its
+    comparator says so (:func:`more_actions`)."""
     lines = [
         "| experiment | method | against | final: P [95% CI] | verdict | efficiency: P [95% CI] | verdict "
         "| efficiency, paper's accounting | normalised final score, method / against |",
@@ -382,7 +494,7 @@ def verdict_table(
     for exp in summary.experiments.values():
         title = exp.spec.get("title", exp.spec["name"])
         marked = privileged(exp.spec_methods)
-        for pair in exp.verdicts or ():
+        for pair in ordered(exp.verdicts or (), marked, methods or ()):
             if pair.role not in roles or pair.parents or not pair.method.startswith(prefix):
                 continue
             if methods is not None and pair.method not in methods:
@@ -400,12 +512,12 @@ def verdict_table(
     return "\n".join(lines)
 
 
-def reproduced(to_threshold: dict[str, float | None]) -> str:
+def reproduced(to_threshold: dict[str, float | None], method: str = "ta-tl") -> str:
     """The paper's central claim, TA-TL reaches the threshold with fewer samples than UMA-TL and
-    RL, read from the median samples to threshold on the paper's protocol and accounting:
-    ``yes`` fewer than both, ``partly`` fewer than one, ``no`` otherwise (TA-TL never reaching
-    it included)."""
-    mine = to_threshold.get("ta-tl")
+    RL, read from the median samples to threshold on the paper's protocol and accounting (``method``:
+    the reading of TA-TL's action): ``yes`` fewer than both, ``partly`` fewer than one, ``no``
+    otherwise (TA-TL never reaching it included)."""
+    mine = to_threshold.get(method)
     if mine is None or math.isinf(mine):
         return "no"
     others = [to_threshold.get(m) for m in ("uma-tl", "rl")]
@@ -414,39 +526,52 @@ def reproduced(to_threshold: dict[str, float | None]) -> str:
 
 
 def paper_table(summary: Summary) -> str:
-    """The paper's own comparison first: per experiment the paper's claim and numbers, ours on the
-    paper's protocol and accounting (the shared random-policy stream, apprentice samples only),
-    ours counted (Algorithm 2's rollouts included), and whether the claim is reproduced."""
+    """The paper's own comparison first: per experiment the paper's claim and numbers, then a row per
+    reading of TA-TL's action (:data:`READINGS`, of equal standing): ours on the paper's protocol and
+    accounting (the shared random-policy stream, apprentice samples only), ours counted (Algorithm
+    2's rollouts included), and whether the claim is reproduced."""
     lines = [
-        "| experiment | the paper | the paper's numbers | here, paper's accounting: median transitions to "
-        "threshold, TA-TL / UMA-TL / RL | here, counted: TA-TL | normalised final score (IQM), TA-TL / UMA-TL / RL "
-        "| reproduced |",
-        "|---|---|---|---|---|---|---|",
+        "| experiment | the paper | the paper's numbers | TA-TL's actions | here, paper's accounting: median "
+        "transitions to threshold, TA-TL / UMA-TL / RL | here, counted: TA-TL | normalised final score (IQM), "
+        "TA-TL / UMA-TL / RL | reproduced |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for exp in summary.experiments.values():
         spec = exp.spec
         paper = spec.get("paper") or {}
         if not paper:
             continue  # a variant or sweep of ours: no claim of the paper's to compare
-        comparison = comparison_of(exp, [m for m in PAPER_METHODS if m in exp.methods])
-        medians = {r.method: r.median_samples_paper for r in comparison.methods if comparison.meaningful}
-        counted = comparison.result("ta-tl")
-        finals = " / ".join(
-            interval_text(exp.methods[m].final_iqm if m in exp.methods else None) for m in PAPER_METHODS
-        )
-        lines.append(
-            f"| {spec.get('title', spec['name'])} | {paper.get('section', '')} | {paper.get('numbers', '')} "
-            f"| {' / '.join(samples_text(medians.get(m)) for m in PAPER_METHODS)} "
-            f"| {samples_text(counted.median_samples if counted else None)} | {finals} | {reproduced(medians)} |"
-        )
+        shown = [m for m in READINGS if m in exp.methods] or [READINGS[0]]
+        for i, reading in enumerate(shown):
+            names = (reading, *PAPER_METHODS[1:])
+            comparison = comparison_of(exp, [m for m in names if m in exp.methods])
+            medians = {r.method: r.median_samples_paper for r in comparison.methods if comparison.meaningful}
+            counted = comparison.result(reading)
+            finals = " / ".join(interval_text(exp.methods[m].final_iqm if m in exp.methods else None) for m in names)
+            claim = (
+                f"{spec.get('title', spec['name'])} | {paper.get('section', '')} | {paper.get('numbers', '')}"
+                if i == 0
+                else "as above | |"
+            )
+            lines.append(
+                f"| {claim} | `{reading}` ({READING_LABELS.get(reading, reading)}) "
+                f"| {' / '.join(samples_text(medians.get(m)) for m in names)} "
+                f"| {samples_text(counted.median_samples if counted else None)} | {finals} "
+                f"| {reproduced(medians, reading)} |"
+            )
     return "\n".join(lines)
 
 
 __all__ = [
+    "CREDIT_READING",
     "PAPER_METHODS",
+    "READINGS",
     "aggregate_table",
+    "apprentice_rows",
+    "apprentice_samples",
     "answer_text",
     "credit_table",
+    "credits",
     "paper_table",
     "reproduced",
     "seed_note",

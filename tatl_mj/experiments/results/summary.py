@@ -125,6 +125,9 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             # Of those, the real-target transitions of policy rollouts (Algorithm 2's U_M): the
             # paper's accounting leaves them out ([seed][budget]).
             "rollout_transitions": [[p["rollout_transitions"] for p in c] for c in curves],
+            # The shared samples the method kept at each budget (TA-TL: the apprentice's, those
+            # Algorithm 2 stopped at), [seed][budget]; a record without them: the budget.
+            "samples_used": [[p.get("samples_used", p["samples"]) for p in c] for c in curves],
         },
         "data": recs[seeds_done[0]]["data"],
         # Per seed, each evaluation episode's steps at the largest budget.

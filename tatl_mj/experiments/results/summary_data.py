@@ -49,13 +49,21 @@ class Curve:
     mean_return: tuple[tuple[float, ...], ...]
     target_transitions: tuple[tuple[float, ...], ...]
     rollout_transitions: tuple[tuple[float, ...], ...]
+    samples_used: tuple[tuple[float, ...], ...] | None = None
+    """The shared samples kept at each budget (TA-TL: its apprentice's); None in an older summary."""
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Curve:
         def rows(key: str) -> tuple[tuple[float, ...], ...]:
             return tuple(tuple(row) for row in data[key])
 
-        return cls(tuple(data["samples"]), rows("mean_return"), rows("target_transitions"), rows("rollout_transitions"))
+        return cls(
+            tuple(data["samples"]),
+            rows("mean_return"),
+            rows("target_transitions"),
+            rows("rollout_transitions"),
+            rows("samples_used") if "samples_used" in data else None,
+        )
 
     def transitions(self, accounting: str, placed: bool = True) -> np.ndarray:
         """[seed][budget] transitions on an accounting (``verdicts.transitions``); ``placed``: a point
