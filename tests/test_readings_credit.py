@@ -119,3 +119,57 @@ def test_an_older_summary_without_the_samples_still_loads():
     curve = {"samples": [100], "mean_return": [[0.0]], "target_transitions": [[100]], "rollout_transitions": [[0]]}
     assert Curve.from_json(curve).samples_used is None
     assert Curve.from_json({**curve, "samples_used": [[50]]}).samples_used == ((50,),)
+
+
+def test_a_verdict_credits_only_against_a_comparator_with_no_privilege_the_method_lacks():
+    methods = {
+        "ta-tl": {},
+        "ta-tl-no-alg2": {"method": "ta-tl", "zeta": None},
+        "apprentice-fqi": {},
+        "apprentice-fqi-samples": {},
+        "uma-tl-reset": {},
+        "rl-reset": {},
+        "rl": {},
+    }
+    marked = tables.privileged(methods)
+    assert marked == {
+        "ta-tl": frozenset({"reward function"}),
+        "apprentice-fqi": frozenset({"reward function", "reset box"}),
+        "uma-tl-reset": frozenset({"resets"}),
+        "rl-reset": frozenset({"resets"}),
+    }
+    credit = {
+        (m, o): tables.credits(_pair(m, o, "ablation", "worse"), marked)
+        for m, o in [
+            ("ta-tl", "apprentice-fqi-samples"),  # none held: credits
+            ("ta-tl-no-alg2", "apprentice-fqi-samples"),
+            ("ta-tl", "apprentice-fqi"),  # the reset box's states ta-tl lacks
+            ("ta-tl-no-alg2", "apprentice-fqi"),
+            ("uma-tl-reset", "rl-reset"),  # the same privilege on both sides
+            ("rl", "rl-reset"),
+            ("ta-tl-no-alg2", "ta-tl"),  # the reward function the variant lacks
+        ]
+    }
+    assert credit == {
+        ("ta-tl", "apprentice-fqi-samples"): True,
+        ("ta-tl-no-alg2", "apprentice-fqi-samples"): True,
+        ("ta-tl", "apprentice-fqi"): False,
+        ("ta-tl-no-alg2", "apprentice-fqi"): False,
+        ("uma-tl-reset", "rl-reset"): True,
+        ("rl", "rl-reset"): False,
+        ("ta-tl-no-alg2", "ta-tl"): False,
+    }
+
+
+def test_privileges_are_named_from_the_declared_list_and_checked_once():
+    import pytest
+
+    from tatl_mj.transfer.method import PRIVILEGES, contract
+
+    legacy = types.SimpleNamespace(name="mine", privileged=True)
+    assert contract(legacy).privileges == frozenset({"unnamed"}) and contract(legacy).privileged
+    assert not contract(types.SimpleNamespace(name="mine")).privileged
+    assert set(PRIVILEGES) >= {"resets", "reward function", "reset box", "true model"}
+    for bad in (("reward",), "resets"):
+        with pytest.raises(ValueError, match=r"method 'mine' declares privileges .*: each must be one of \["):
+            contract(types.SimpleNamespace(name="mine", privileges=bad))

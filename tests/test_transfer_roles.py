@@ -183,7 +183,7 @@ def test_the_verdict_tables_label_every_privileged_side():
 
     methods = {"ta-tl": {}, "ta-tl-no-alg2": {"method": "ta-tl", "zeta": None}, "apprentice-fqi": {}, "rl": {}}
     marked = tables.privileged(methods)
-    assert marked == {"ta-tl", "apprentice-fqi"}
+    assert set(marked) == {"ta-tl", "apprentice-fqi"}
     pair = PairVerdict("ta-tl-no-alg2", "apprentice-fqi", "ablation", False, None, None, None)
     assert tables.against(pair, marked) == (
         "`apprentice-fqi` (source-free, privileged: does not credit or discredit transfer)"

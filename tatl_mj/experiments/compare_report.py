@@ -117,8 +117,12 @@ def table(summary: Mapping[str, Any], methods: Sequence[str]) -> list[str]:
         for name, experiment in summary["experiments"].items()
     }
     for row in found:
-        note = f"both near random (median final score < {NEAR_RANDOM:g})" if row["near_random"] else ""
-        role = row["role"] + (f", {tables.PRIVILEGED}" if row["other"] in marked[row["experiment"]] else "")
+        notes = [f"both near random (median final score < {NEAR_RANDOM:g})"] if row["near_random"] else []
+        held = marked[row["experiment"]]
+        if not tables.no_more_resources(held, row["method"], row["other"]):
+            notes.append(f"privileged comparator: {tables.NOT_CREDIT}")
+        note = "; ".join(notes)
+        role = row["role"] + (f", {tables.PRIVILEGED}" if row["other"] in held else "")
         lines.append(
             f"| {row['experiment']} | `{row['method']}` | `{row['other']}` ({role}) | "
             f"{_cell(row.get(verdicts.FINAL))} | {_cell(row.get(verdicts.EFFICIENCY))} | {note} |"

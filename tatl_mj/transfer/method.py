@@ -211,6 +211,10 @@ class TransferMethod(Protocol):
     - ``privileged``: True for a method that uses what a robot in the target lacks:
       simulator resets to chosen states, the target's reward function at states of its
       choosing, or the target's true model (default False);
+    - ``privileges``: which of those it uses, named from :data:`PRIVILEGES` (default: none;
+      a method that says ``privileged`` and names none holds ``"unnamed"``). A verdict credits
+      transfer only against a comparator whose privileges the method holds too
+      (``tatl_mj.experiments.report.tables.credits``);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n);
     - on the returned policy, ``decide_together(policies)``: called on the first of
@@ -236,6 +240,16 @@ class TransferMethod(Protocol):
     def learn(self, problem: TransferProblem, target_samples: Transitions) -> Policy: ...
 
 
+PRIVILEGES = {
+    "resets": "simulator resets to states it chooses",
+    "reward function": "the target's reward function at states no target episode visited",
+    "reset box": "model states drawn from the target's whole reset box",
+    "true model": "the target's true model, or its simulator stepped from a chosen state",
+    "unnamed": "a privilege its method declares without naming it",
+}
+"""The target resources a robot lacks, by name: a method's ``privileges`` come from here."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Contract:
     """What the experiments read of a method beyond ``name`` and ``learn`` (see
@@ -248,7 +262,11 @@ class Contract:
     uses_source: bool = True
     ablation_of: tuple[str, ...] = ()
     baseline: bool = False
-    privileged: bool = False
+    privileges: frozenset[str] = frozenset()
+
+    @property
+    def privileged(self) -> bool:
+        return bool(self.privileges)
 
 
 def contract(method: Any) -> Contract:
@@ -262,7 +280,7 @@ def contract(method: Any) -> Contract:
         uses_source=bool(getattr(method, "uses_source", True)),
         ablation_of=_names(method, getattr(method, "ablation_of", ())),
         baseline=bool(getattr(method, "baseline", False)),
-        privileged=bool(getattr(method, "privileged", False)),
+        privileges=_privileges(method),
     )
     if declared.ablation_of and declared.uses_source:
         # A win over an ablation that reads the source would not be a win of the source.
@@ -271,6 +289,19 @@ def contract(method: Any) -> Contract:
             "but uses the source: a source-free ablation declares uses_source = False"
         )
     return declared
+
+
+def _privileges(method: Any) -> frozenset[str]:
+    declared = getattr(method, "privileges", ()) or ()
+    names = (declared,) if isinstance(declared, str) else tuple(declared)
+    if isinstance(declared, str) or any(n not in PRIVILEGES for n in names):
+        raise ValueError(
+            f"method {getattr(method, 'name', method)!r} declares privileges {list(names)!r}: "
+            f"each must be one of {sorted(PRIVILEGES)}"
+        )
+    if not names and getattr(method, "privileged", False):
+        return frozenset({"unnamed"})
+    return frozenset(names)
 
 
 def _names(method: Any, value: Any) -> tuple[str, ...]:
@@ -326,6 +357,7 @@ __all__ = [
     "Contract",
     "JointDecisions",
     "Model",
+    "PRIVILEGES",
     "Policy",
     "SourceWithheld",
     "TransferMethod",

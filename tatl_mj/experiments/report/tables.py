@@ -40,12 +40,13 @@ PRIVILEGED = "privileged"
 function at states it chooses): a verdict against it does not credit transfer (docs/protocol.md)."""
 
 
-def privileged(spec_methods: Mapping[str, object]) -> set[str]:
-    """The spec's methods whose roles declare them privileged (read from the built methods)."""
-    return {name for name, roles in pairs_mod.roles_of(spec_methods).items() if roles.privileged}
+def privileged(spec_methods: Mapping[str, object]) -> dict[str, frozenset[str]]:
+    """The spec's privileged methods, each with the privileges its roles name (read from the built
+    methods; ``tatl_mj.transfer.method.PRIVILEGES``)."""
+    return {name: roles.privileges for name, roles in pairs_mod.roles_of(spec_methods).items() if roles.privileged}
 
 
-def against(pair: PairVerdict, marked: set[str]) -> str:
+def against(pair: PairVerdict, marked: Mapping[str, frozenset[str]]) -> str:
     """A pair's other side with its role, and ``privileged`` where it is (with :data:`NOT_CREDIT`
     where the verdict against it does not credit transfer, :func:`credits`)."""
     words = [ROLE_WORDS[pair.role], *([PRIVILEGED] if pair.other in marked else [])]
@@ -53,7 +54,7 @@ def against(pair: PairVerdict, marked: set[str]) -> str:
     return f"`{pair.other}` ({', '.join(words)}{note})"
 
 
-def method_cell(name: str, marked: set[str]) -> str:
+def method_cell(name: str, marked: Mapping[str, frozenset[str]]) -> str:
     """A pair's method, with ``(privileged)`` where it is."""
     return f"`{name}` ({PRIVILEGED})" if name in marked else f"`{name}`"
 
@@ -65,12 +66,21 @@ INFORMATION = "information"
 MORE_ACTIONS = "more actions than its comparator"
 
 
-def credits(pair: PairVerdict, marked: set[str]) -> bool:
-    """Whether a pair's verdict credits (or discredits) transfer: not where the comparator is
-    privileged (it has target resources a robot lacks, more than a transfer method needs), unless
-    it is the method's own placebo, the same method with the same resources. The verdict of a pair
-    that does not credit is printed as information (:data:`NOT_CREDIT`); the rule is unchanged."""
-    return pair.role == verdicts.PLACEBO or pair.other not in marked
+def credits(pair: PairVerdict, marked: Mapping[str, frozenset[str]]) -> bool:
+    """Whether a pair's verdict credits (or discredits) transfer: only where the comparator has no
+    more target resources than the method, every privilege it holds (``marked``, by name) held by
+    the method too: a non-privileged comparator always; ``uma-tl-reset`` against ``rl-reset`` (both
+    reset the simulator); not ``ta-tl`` (the reward function on its apprentice's rollouts) against
+    ``apprentice-fqi`` (the reward function on states from the whole reset box). A method's placebo
+    has its privileges. The verdict of a pair that does not credit is printed as information
+    (:data:`NOT_CREDIT`); the rule is unchanged."""
+    return no_more_resources(marked, pair.method, pair.other)
+
+
+def no_more_resources(marked: Mapping[str, frozenset[str]], method: str, other: str) -> bool:
+    """Whether ``other`` holds no privilege that ``method`` lacks (``marked``: the privileged
+    methods' privileges, :func:`privileged`)."""
+    return marked.get(other, frozenset()) <= marked.get(method, frozenset())
 
 
 def more_actions(pair: PairVerdict, spec_methods: Mapping[str, object]) -> bool:
@@ -84,14 +94,16 @@ def more_actions(pair: PairVerdict, spec_methods: Mapping[str, object]) -> bool:
     return continuous(pair.method) and not continuous(pair.other)
 
 
-def _row_order(pair: PairVerdict, marked: set[str]) -> tuple[int, bool]:
+def _row_order(pair: PairVerdict, marked: Mapping[str, frozenset[str]]) -> tuple[int, bool]:
     """Within a method's rows: source-free comparators first, each non-privileged one before the
     privileged one beside it, then the placebo, then the best baseline."""
     roles = (verdicts.ABLATION, verdicts.PLACEBO, verdicts.BEST_BASELINE)
     return (roles.index(pair.role) if pair.role in roles else len(roles), pair.other in marked)
 
 
-def ordered(pairs: Sequence[PairVerdict], marked: set[str], methods: Sequence[str] = ()) -> list[PairVerdict]:
+def ordered(
+    pairs: Sequence[PairVerdict], marked: Mapping[str, frozenset[str]], methods: Sequence[str] = ()
+) -> list[PairVerdict]:
     """A table's pairs grouped by method (``methods``' order first, then the declared order), each
     method's rows in :func:`_row_order`."""
     first: dict[str, int] = {}

@@ -90,10 +90,10 @@ class HorizonTATL(TATL):
         return () if self.uses_source else ("ta-tl-h",)
 
     @property
-    def privileged(self) -> bool:
-        """True for ``model = "oracle"``: it steps the real target simulator from a chosen state
-        (the zero state) to linearise it, which a robot cannot; and with Algorithm 2 on, as ``ta-tl``."""
-        return self.model == "oracle" or super().privileged
+    def privileges(self) -> tuple[str, ...]:
+        """``true model`` for ``model = "oracle"``: it steps the real target simulator from a chosen
+        state (the zero state) to linearise it, which a robot cannot; and Algorithm 2's, as ``ta-tl``."""
+        return (("true model",) if self.model == "oracle" else ()) + super().privileges
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         super().check(source, target)

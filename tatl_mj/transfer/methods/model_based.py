@@ -47,7 +47,7 @@ class ApprenticeFQI(TargetFQI):
     ablation_of = ("ta-tl",)  # ta-tl's own apprentice, without the source
     # It scores model transitions from states spread over the target's reset box with the
     # target's own reward function (problem.target_reward): states a robot does not choose.
-    privileged = True
+    privileges = ("reward function", "reset box")
 
     constraints: ClassVar[Constraints] = {
         **TargetFQI.constraints,

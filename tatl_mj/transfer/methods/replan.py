@@ -259,7 +259,7 @@ class OneStepOracle:
 
     name: str = "ta-tl-oracle"
     uses_samples = False
-    privileged = True  # it reads the target's true model, which a robot has no access to
+    privileges = ("true model",)  # it reads the target's true model, which a robot has no access to
     constraints: ClassVar[Constraints] = {}  # no settings
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:

@@ -116,7 +116,7 @@ class ApprenticeFQISamples(TargetFQI):
     model_samples: int = 20000
     name: str = "apprentice-fqi-samples"
     ablation_of = ("ta-tl",)  # ta-tl's own apprentice without the source, as ta-tl-no-alg2 fits it
-    privileged = False  # only the counted samples, its apprentice and its computation
+    privileges = ()  # only the counted samples, its apprentice and its computation
 
     constraints: ClassVar[Constraints] = {
         **TargetFQI.constraints,

@@ -144,9 +144,9 @@ class TargetFQI:
         return self.source_use != "none"
 
     @property
-    def privileged(self) -> bool:
-        """True on the ``reset`` protocol: a simulator reset to chosen states, which a robot lacks."""
-        return self.data == "reset"
+    def privileges(self) -> tuple[str, ...]:
+        """``resets`` on the ``reset`` protocol: a simulator reset to chosen states, which a robot lacks."""
+        return ("resets",) if self.data == "reset" else ()
 
     @property
     def linear_features(self) -> dict:

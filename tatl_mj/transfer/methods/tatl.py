@@ -76,10 +76,10 @@ class TATL:
         check_settings(self)
 
     @property
-    def privileged(self) -> bool:
-        """True with Algorithm 2 on (``zeta`` set): its U_Mhat scores the apprentice's predicted
-        states with the target task's own reward function, states no target episode visited."""
-        return self.zeta is not None
+    def privileges(self) -> tuple[str, ...]:
+        """``reward function`` with Algorithm 2 on (``zeta`` set): its U_Mhat scores the apprentice's
+        predicted states with the target task's own reward function, states no target episode visited."""
+        return ("reward function",) if self.zeta is not None else ()
 
     def check(self, source: TaskDescription, target: TaskDescription) -> None:
         """Settings that need the tasks' descriptions (basis size, actuator)."""
