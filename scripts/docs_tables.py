@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tatl_mj.experiments.report import credit_maps, figures, tables
+from tatl_mj.experiments.report import credit_maps, figures, premises, tables
 from tatl_mj.experiments.results import reference
 from tatl_mj.experiments.results.summary_data import Summary
 
@@ -33,6 +33,8 @@ def blocks(paper: Summary, sweeps: Summary) -> dict[tuple[str, str], str]:
         ("docs/results-paper.md", "credited-anywhere"): tables.verdict_table(paper, credited_only=True),
         ("docs/results-paper.md", "results"): tables.table(paper) + "\n" + tables.aggregate_table(paper),
         ("docs/credit.md", "credit-tables"): credit,
+        # Only a reference set with premises (record schema 3) has a "why" table: else the block is empty.
+        ("docs/results-paper.md", "why"): premises.why_table(paper),
     }
 
 
@@ -53,6 +55,7 @@ def draw(summary: Summary, out: Path) -> None:
     maps = credit_maps.sweeps(summary)
     if summary.aggregate and not maps:
         figures.profile(summary, out / "performance_profile.png")
+        premises.premises_figure(summary, out / "premises.png")  # draws nothing without premises
     for name, cells in maps.items():
         credit_maps.credit_map(name, cells, out / f"credit_{name}.png")
 

@@ -177,7 +177,7 @@ def test_other_seeds_another_preset_schema_or_dynamics_are_refused(tiny_referenc
     with pytest.raises(compare.CompareError) as caught:
         compare.plan(older, [spec], methods)
     assert str(caught.value) == (
-        "reference 'tiny' holds records of schema 1; this tatl-mj writes schema 2: use a reference set made by "
+        "reference 'tiny' holds records of schema 1; this tatl-mj writes schema 3: use a reference set made by "
         "this version (`tatl reference list`)"
     )
     moved = json.loads(json.dumps(built.manifest.experiments))

@@ -23,14 +23,16 @@ def test_a_schema1_method_record_gains_its_version_and_its_rollouts():
     record = old("ta-tl")
     assert "schema_version" not in record
     new = records.upgrade(record, "ta-tl.json")
-    assert new["schema_version"] == records.SCHEMA_VERSION == 2
+    assert new["schema_version"] == records.SCHEMA_VERSION == 3
+    assert all(p["premises"] is None for p in new["curve"])  # schema 3: nothing was measured
     # TA-TL learns from the shared stream: what it counted beyond the samples it kept were rollouts.
     counted = [p["target_transitions"] for p in record["curve"]]
     kept = [p["samples_used"] for p in record["curve"]]
     assert counted == [900, 900, 900] and kept == [100, 100, 100]
     assert [p["rollout_transitions"] for p in new["curve"]] == [800, 800, 800]
     # Nothing else moves.
-    assert [{k: v for k, v in p.items() if k != "rollout_transitions"} for p in new["curve"]] == record["curve"]
+    moved = ("rollout_transitions", "premises")
+    assert [{k: v for k, v in p.items() if k not in moved} for p in new["curve"]] == record["curve"]
     assert new["dynamics"] == {}  # schema 1 named no dynamics versions
     assert {k: v for k, v in new.items() if k not in ("schema_version", "curve", "dynamics")} == {
         k: v for k, v in record.items() if k != "curve"
@@ -59,7 +61,7 @@ def test_records_older_than_counting_kernels_and_protocols_are_read_with_the_old
 
 def test_a_source_record_gains_its_version_and_names_no_dynamics():
     record = old("source")
-    assert records.upgrade(record) == {**record, "schema_version": 2, "dynamics": {}}
+    assert records.upgrade(record) == {**record, "schema_version": 3, "dynamics": {}}
 
 
 def test_a_record_that_no_upgrade_can_complete_is_named_with_what_it_lacks():
@@ -74,10 +76,10 @@ def test_a_record_that_no_upgrade_can_complete_is_named_with_what_it_lacks():
 
 def test_a_newer_schema_is_refused_in_one_line_naming_the_file():
     with pytest.raises(records.SchemaError) as caught:
-        records.upgrade({**old("ta-tl"), "schema_version": 3}, "runs/x/records/e/seed0/ta-tl.json")
+        records.upgrade({**old("ta-tl"), "schema_version": 4}, "runs/x/records/e/seed0/ta-tl.json")
     assert str(caught.value) == (
-        "runs/x/records/e/seed0/ta-tl.json: record schema 3 is newer than this tatl-mj reads "
-        "(schemas 1 to 2); install a newer tatl-mj to read it"
+        "runs/x/records/e/seed0/ta-tl.json: record schema 4 is newer than this tatl-mj reads "
+        "(schemas 1 to 3); install a newer tatl-mj to read it"
     )
     with pytest.raises(records.RecordError, match="schema_version must be a whole number >= 1, got '2'"):
         records.upgrade({**old("ta-tl"), "schema_version": "2"}, "x.json")
@@ -95,7 +97,8 @@ def test_a_schema1_summary_gains_per_seed_random_returns_and_counted_transitions
     }
     new = records.upgrade(summary)
     experiment = new["experiments"]["e"]
-    assert new["schema_version"] == 2 and new["kernels"] == {}
+    assert new["schema_version"] == 3 and new["kernels"] == {}
+    assert experiment["methods"]["rl"]["premises"] is None
     assert experiment["source_seeds"] == [1, 3] and experiment["random_returns"] == [-5.0, -5.0]
     assert experiment["methods"]["rl"]["data"] == "shared"
     assert experiment["methods"]["rl"]["curve"]["target_transitions"] == [[10, 20], [10, 20]]

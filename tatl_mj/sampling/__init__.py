@@ -30,7 +30,7 @@ its actions.
 from tatl_mj.policy import StatePolicy
 from tatl_mj.sampling.checks import IndexPolicy, ValuePolicy
 from tatl_mj.sampling.collection import collect, policy_transitions
-from tatl_mj.sampling.evaluation import Joint, evaluate, evaluate_policies, one_by_one, start_states
+from tatl_mj.sampling.evaluation import Joint, Visitor, evaluate, evaluate_policies, one_by_one, start_states
 from tatl_mj.sampling.queries import step_from, step_values_from
 from tatl_mj.sampling.schedule import DEFAULT_PARALLEL
 from tatl_mj.sampling.simulator import is_batched, mujoco_threads, physics_substeps
@@ -45,6 +45,7 @@ __all__ = [
     "evaluate",
     "evaluate_policies",
     "Joint",
+    "Visitor",
     "is_batched",
     "mujoco_threads",
     "one_by_one",

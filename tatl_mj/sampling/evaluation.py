@@ -29,6 +29,13 @@ Joint = Callable[[list[int], list[np.ndarray]], list[np.ndarray]]
 values for its live episodes' states, exactly what calling it alone gives (e.g. several
 policies' decisions sharing one source rollout)."""
 
+Visitor = Callable[[int, np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray], Callable[[int], Any]], None]
+"""``visitor(step, live, values, rows, random_of)``, called before each lockstep control step:
+the live simulations (policy b's episode i is b * n + i), their action values, ``rows(ids)``
+the MuJoCo ``mjSTATE_INTEGRATION`` rows of simulations ``ids`` (copies) and ``random_of(id)``
+the stream a simulation's controls draw from (None: they draw nothing). It only reads:
+what it is handed is copied or not used again (the premises' visits)."""
+
 
 def evaluate(
     domain: str,
@@ -67,6 +74,7 @@ def evaluate_policies(
     max_episode_steps: int | None = None,
     n_threads: int | None = None,
     joint: Joint | None = None,
+    visitor: Visitor | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`evaluate` of each of ``policies`` with the same ``seed``, all in one lockstep batch.
 
@@ -86,14 +94,18 @@ def evaluate_policies(
     if joint is None:
         joint = one_by_one(policies)
     if not sim.fast and sim.step_env is not None and not sim.env.task.control_noise:
-        returns, lengths = _evaluate_scheduled(sim, joint, len(policies), n_episodes, seed, max_episode_steps)
+        returns, lengths = _evaluate_scheduled(sim, joint, len(policies), n_episodes, seed, max_episode_steps, visitor)
         return [(returns[b], lengths[b]) for b in range(len(policies))]
     if not sim.fast:
-        return [_evaluate_loop(sim, p, n_episodes, seed, max_episode_steps) for p in policies]
+        # Each policy through ``joint`` (what calling it alone gives), so an observer sees these calls too.
+        return [
+            _evaluate_loop(sim, functools.partial(_through, joint, b), n_episodes, seed, max_episode_steps)
+            for b in range(len(policies))
+        ]
     limit = sim.step_limit(max_episode_steps)
     if not np.isfinite(limit):
         raise ValueError(f"{domain}/{task} has no time limit: give max_episode_steps")
-    returns, lengths = _evaluate_batch(sim, joint, len(policies), n_episodes, seed, limit)
+    returns, lengths = _evaluate_batch(sim, joint, len(policies), n_episodes, seed, limit, visitor)
     return [(returns[b], lengths[b]) for b in range(len(policies))]
 
 
@@ -102,12 +114,22 @@ def one_by_one(policies: Sequence[ValuePolicy]) -> Joint:
     return functools.partial(_call_each, policies)
 
 
+def _through(joint: Joint, block: int, states: np.ndarray) -> np.ndarray:
+    return joint([block], [states])[0]
+
+
 def _call_each(policies: Sequence[ValuePolicy], blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
     return [policies[b](s) for b, s in zip(blocks, states)]
 
 
 def _evaluate_batch(
-    sim: Simulator, joint: Joint, n_policies: int, n_episodes: int, seed: int, limit: float
+    sim: Simulator,
+    joint: Joint,
+    n_policies: int,
+    n_episodes: int,
+    seed: int,
+    limit: float,
+    visitor: Visitor | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(K, n) returns and lengths: simulation b * n + i is policy b's episode i."""
     with sim.seeded_env(seed) as env:
@@ -121,11 +143,18 @@ def _evaluate_batch(
             return controls_each(task_obj, values, None if randoms is None else [randoms[i] for i in live])
 
         starts = task_obj.start_configurations(env.physics, n_episodes)
-        return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit)
+        random_of = (lambda i: None) if randoms is None else randoms.__getitem__
+        return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit, visit=(visitor, random_of))
 
 
 def _evaluate_scheduled(
-    sim: Simulator, joint: Joint, n_policies: int, n_episodes: int, seed: int, max_episode_steps: int | None
+    sim: Simulator,
+    joint: Joint,
+    n_policies: int,
+    n_episodes: int,
+    seed: int,
+    max_episode_steps: int | None,
+    visitor: Visitor | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(K, n) returns and lengths of :func:`_evaluate_loop`'s episodes, batched: a task whose
     model depends on the step alone (``model_for_step``), its episodes all at the same step.
@@ -141,7 +170,10 @@ def _evaluate_scheduled(
     batch = sim.new_batch(n_policies * n_episodes)
     limit = min(sim.step_limit(None), np.inf if max_episode_steps is None else max_episode_steps)
     controls = lambda values, live: task_obj.controls(values, None)  # noqa: E731
-    return _lockstep(sim, task_obj, joint, n_policies, starts, controls, limit, batch, sim.scheduled_models(batch))
+    models = sim.scheduled_models(batch)
+    return _lockstep(
+        sim, task_obj, joint, n_policies, starts, controls, limit, batch, models, (visitor, lambda i: None)
+    )
 
 
 def _lockstep(
@@ -154,10 +186,12 @@ def _lockstep(
     limit: float,
     batch: Any = None,
     model_for: Callable[[int], None] | None = None,
+    visit: tuple[Visitor | None, Callable[[int], Any]] = (None, lambda i: None),
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every policy's episodes of ``task_obj`` from ``starts`` (qpos, qvel of episode i), all in
     one batch: simulation b * n + i is policy b's episode i. ``controls(values, live)`` gives the live
-    rows' controls; ``model_for(step)``, where given, sets the batch's model for that step."""
+    rows' controls; ``model_for(step)``, where given, sets the batch's model for that step;
+    ``visit``: a :data:`Visitor` (None: none) and each simulation's random stream."""
     n_episodes = len(starts[0])
     total = n_policies * n_episodes
     batch = sim.new_batch(total) if batch is None else batch
@@ -170,6 +204,8 @@ def _lockstep(
     step = 0
     while len(live):
         values = _joint_values(joint, sim, live, states, n_episodes)
+        if visit[0] is not None:
+            visit[0](step, live, values, lambda ids: np.array(batch.state[ids]), visit[1])
         if model_for is not None:
             model_for(step)
         next_states, diverged = sim.advance(batch, live, controls(values, live), lengths[live] == 0)

@@ -61,6 +61,22 @@ class TATLStep:
     action: np.ndarray  # (N, mT) a_T + K pi_ad, clipped or snapped
 
 
+@dataclasses.dataclass(frozen=True)
+class PremiseStep:
+    """What one batch of decisions shows the premises' measurements (``tatl_mj.transfer.premises``).
+
+    Attributes:
+      action: (N, mT) the action values the policy returns, exactly its ``__call__``'s.
+      requested: (N, mT) ``a_T + K pi_ad`` before any clip or snap; None where the
+        policy has no such request (a discrete target's).
+      projected: (N, dT) ``s_hat_T_next``, the projected source next state; None where not formed.
+    """
+
+    action: np.ndarray
+    requested: np.ndarray | None = None
+    projected: np.ndarray | None = None
+
+
 _POLICY: Constraints = {
     "source_step": [Function("(states (N, dS), action indices (N,)) -> (N, dS)")],
     "source_actions": [Array(2)],
@@ -168,6 +184,12 @@ class TATLPolicy:
         """(N, dT) target states -> (N, mT) target action values."""
         return self.step(target_states).action
 
+    def premise_step(self, target_states: np.ndarray) -> PremiseStep:
+        """The method contract's ``premise_step`` hook: the same decision as ``__call__``
+        (one :meth:`step`), with the request before clipping and s_hat_T_next beside it."""
+        step = self.step(target_states)
+        return PremiseStep(step.action, step.a_T + step.adaptive, step.s_hat_T_next)
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class DiscreteTATLPolicy:
@@ -217,5 +239,10 @@ class DiscreteTATLPolicy:
         rows = np.arange(len(dist))
         return np.where(near[rows, a_S], a_S, np.argmax(near, axis=1)).astype(np.int64)
 
+    def premise_step(self, target_states: np.ndarray) -> PremiseStep:
+        """The method contract's ``premise_step`` hook: ``__call__``'s indices; an index
+        is always feasible and the grid's measure is the apprentice's misprediction."""
+        return PremiseStep(self(target_states))
 
-__all__ = ["DiscreteTATLPolicy", "SourceStep", "TATLPolicy", "TATLStep"]
+
+__all__ = ["DiscreteTATLPolicy", "PremiseStep", "SourceStep", "TATLPolicy", "TATLStep"]

@@ -27,7 +27,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.policy import StatePolicy
-from tatl_mj.transfer.algorithm1 import SourceStep
+from tatl_mj.transfer.algorithm1 import PremiseStep, SourceStep
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transitions import Transitions
@@ -221,7 +221,12 @@ class TransferMethod(Protocol):
       several policies evaluated side by side (a learning curve's budgets), a
       :data:`JointDecisions` that gives each block's states exactly the actions its
       policy gives them alone, sharing work between them, or None where they cannot
-      (:func:`joint_decisions` reads it; default: each policy is called on its own).
+      (:func:`joint_decisions` reads it; default: each policy is called on its own);
+    - on the returned policy, ``premise_step(states)``: the very decision ``policy(states)``
+      gives, as a :class:`~tatl_mj.transfer.algorithm1.PremiseStep` with what the theorem's
+      premises are measured by (the request before clipping, s_hat_next), and attributes
+      ``apprentice`` and ``mapping``; a policy with it is TA-TL's and its evaluation
+      measures the premises (:func:`premise_probe` reads it; default: not measured).
 
     ``uses_source``, ``ablation_of``, ``baseline``, ``privileged`` and ``source`` are the
     method's roles: the runner, the verdicts and the reports read them from the built
@@ -347,6 +352,15 @@ def joint_decisions(policies: Sequence[Any]) -> JointDecisions | None:
     return None if hook is None else hook(policies)
 
 
+def premise_probe(policy: Any) -> Callable[[np.ndarray], PremiseStep] | None:
+    """``policy``'s ``premise_step`` hook (see :class:`TransferMethod`) where it has one and
+    the ``apprentice`` and ``mapping`` it is measured by, else None (no premises measured)."""
+    hook = getattr(policy, "premise_step", None)
+    if hook is None or getattr(policy, "apprentice", None) is None or getattr(policy, "mapping", None) is None:
+        return None
+    return hook
+
+
 def samples_used(policy: Any, budget: int) -> int:
     """How many of the ``budget`` shared samples ``policy`` kept (its ``samples_used``, else all)."""
     reported = getattr(policy, "samples_used", None)
@@ -365,5 +379,6 @@ __all__ = [
     "Withheld",
     "contract",
     "joint_decisions",
+    "premise_probe",
     "samples_used",
 ]

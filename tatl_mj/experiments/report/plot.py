@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tatl_mj.experiments.report import credit_maps, figures, tables
+from tatl_mj.experiments.report import credit_maps, figures, premises, tables
 from tatl_mj.experiments.results import summary_data
 from tatl_mj.experiments.results.comparison import comparison_of
 
@@ -26,12 +26,17 @@ def plot(run_dir: str | Path) -> list[Path]:
         written.append(figures.figure(name, experiment, out / f"{name}.png"))
     if summary.aggregate:
         written.append(figures.profile(summary, out / "performance_profile.png"))
+    drawn = premises.premises_figure(summary, out / "premises.png")  # None: no record has premises
+    if drawn is not None:
+        written.append(drawn)
     credit = []
     for name, cells in credit_maps.sweeps(summary).items():
         written.append(credit_maps.credit_map(name, cells, out / f"credit_{name}.png"))
         credit.append(tables.credit_table(name, cells))
     results = run_dir / "results.md"
-    results.write_text(tables.table(summary) + "\n" + tables.aggregate_table(summary) + "\n" + "\n".join(credit))
+    why = premises.why_table(summary)
+    why = f"\n## Why: the theorem's premises\n\n{why}" if why else ""
+    results.write_text(tables.table(summary) + "\n" + tables.aggregate_table(summary) + "\n" + "\n".join(credit) + why)
     written.append(results)
     return written
 

@@ -37,13 +37,17 @@ SOURCE_KEYS = ("random_return",)
 METHOD_KEYS = ("curve", "final_return")
 TEMPORARY = ".{name}.{tag}.tmp"  # where write_atomic writes before its rename
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """The record schema this package writes. 1: records without ``schema_version`` (every
 record before it was kept). 2: every unit record and summary names its schema; each
 point of a method's curve counts ``rollout_transitions``, the real-target transitions
 of policy rollouts charged at that budget (Algorithm 2's U_M rollouts), so that
 ``target_transitions - rollout_transitions`` is the paper's accounting; and every unit
-record names its tasks' dynamics versions (``dynamics``: ``{"domain/task": N}``)."""
+record names its tasks' dynamics versions (``dynamics``: ``{"domain/task": N}``).
+3: each point of a method's curve carries ``premises``, the theorem's premises measured
+on its evaluation episodes (``tatl_mj.transfer.premises.PremiseMeasurements``' fields,
+numbers or null; null for a method that is not TA-TL, and in every older record), and a
+summary's method carries ``premises`` (per seed, per budget; ``results.summary``)."""
 SHARED_DATA = "shared"
 """The ``data`` setting of a method that learns from the shared random-policy stream (counted by
 ``samples_used``)."""
@@ -153,7 +157,22 @@ def upgrade(record: Any, where: str | Path = "<record>") -> dict:
             record = _summary_v2(record) if "experiments" in record else _unit_v2(record)
         except (KeyError, TypeError) as error:
             raise RecordError(f"{where}: a schema-1 record without {error}, which no upgrade can derive") from None
+    if record.get("schema_version") == 2:
+        record = _v3(record)
     return _data_words(record)
+
+
+def _v3(record: dict) -> dict:
+    """A schema-2 record in schema 3: nothing was measured of the premises (None)."""
+    if "experiments" in record:
+        experiments = {}
+        for name, experiment in record["experiments"].items():
+            methods = experiment.get("methods") or {}
+            experiments[name] = {**experiment, "methods": {k: {"premises": None, **m} for k, m in methods.items()}}
+        return {**record, "schema_version": 3, "experiments": experiments}
+    if isinstance(record.get("curve"), list):
+        record = {**record, "curve": [{"premises": None, **p} for p in record["curve"]]}
+    return {**record, "schema_version": 3}
 
 
 def _data_words(record: dict) -> dict:

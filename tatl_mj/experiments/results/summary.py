@@ -130,6 +130,11 @@ def _method_entry(recs: dict[int, dict]) -> dict[str, Any]:
             "samples_used": [[p.get("samples_used", p["samples"]) for p in c] for c in curves],
         },
         "data": recs[seeds_done[0]]["data"],
+        # The theorem's premises per seed and budget (a point's ``premises``), None where no
+        # point has any (a method that is not TA-TL): report.premises reads them.
+        "premises": [[p.get("premises") for p in c] for c in curves]
+        if any(p.get("premises") for c in curves for p in c)
+        else None,
         # Per seed, each evaluation episode's steps at the largest budget.
         "final_steps": {str(s): recs[s]["curve"][-1]["steps"] for s in seeds_done},
         # Per seed, each evaluation episode's steadiness at the largest budget (where declared).

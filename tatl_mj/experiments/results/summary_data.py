@@ -104,6 +104,8 @@ class MethodSummary:
     survival: Survival | None = None
     steadiness: Mapping[str, Interval] | None = None
     steadiness_seeds: tuple[int, ...] = ()
+    premises: tuple[tuple[Mapping[str, float | None] | None, ...], ...] | None = None
+    """[seed][budget] the premises measured at each point (None: none measured, or an older record)."""
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> MethodSummary:
@@ -133,6 +135,7 @@ class MethodSummary:
             ),
             steadiness=None if steadiness is None else {k: Interval.from_json(v) for k, v in steadiness.items()},  # type: ignore[misc]
             steadiness_seeds=tuple(data.get("steadiness_seeds", ())),
+            premises=None if data.get("premises") is None else tuple(tuple(row) for row in data["premises"]),
         )
 
     def rows(self, seeds: tuple[int, ...] | list[int]) -> list[int]:

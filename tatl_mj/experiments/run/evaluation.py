@@ -9,7 +9,7 @@ by one.
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -19,13 +19,29 @@ from tatl_mj.experiments.spec import ExperimentSpec, Preset
 from tatl_mj.transfer import method
 
 
+class Observer(Protocol):
+    """What ``evaluate_curve`` asks of an observer (``run.premises.PremiseObserver``)."""
+
+    @property
+    def active(self) -> bool: ...
+
+    def joint(self, together: method.JointDecisions) -> method.JointDecisions: ...
+
+    def visitor(self, step: int, live: np.ndarray, values: np.ndarray, rows: Callable, random_of: Callable) -> None: ...
+
+
 def target_returns(spec: ExperimentSpec, preset: Preset, policy: Callable, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-episode returns and lengths of ``policy`` on the target task."""
     return _on_target(spec, preset, [policy], seed)[0]
 
 
 def _on_target(
-    spec: ExperimentSpec, preset: Preset, policies: list[Callable], seed: int, joint: sampling.Joint | None = None
+    spec: ExperimentSpec,
+    preset: Preset,
+    policies: list[Callable],
+    seed: int,
+    joint: sampling.Joint | None = None,
+    visitor: sampling.Visitor | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     target = spec.target
     return sampling.evaluate_policies(
@@ -37,16 +53,26 @@ def _on_target(
         task_kwargs=target.task_kwargs,
         max_episode_steps=preset.evaluation_steps,
         joint=joint,
+        visitor=visitor,
     )
 
 
 def evaluate_curve(
-    spec: ExperimentSpec, preset: Preset, policies: list[Callable], seed: int, record: bool
+    spec: ExperimentSpec,
+    preset: Preset,
+    policies: list[Callable],
+    seed: int,
+    record: bool,
+    observer: Observer | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray, list | None]]:
     """Each policy's per-episode returns and lengths on the target task, from the same starts,
     all in one lockstep batch (a learning curve's budgets), and with ``record`` each one's
-    per-episode (states, action values) lists for steadiness."""
+    per-episode (states, action values) lists for steadiness. ``observer`` (the premises')
+    answers its TA-TL policies' decisions with the same values and keeps what it sees."""
     together = method.joint_decisions(policies) or sampling.one_by_one(policies)
+    visitor = None
+    if observer is not None and observer.active:
+        together, visitor = observer.joint(together), observer.visitor
     calls: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in policies]
 
     def joint(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
@@ -56,7 +82,7 @@ def evaluate_curve(
                 calls[b].append((np.array(s, dtype=np.float64), np.array(v, dtype=np.float64)))
         return values
 
-    results = _on_target(spec, preset, policies, seed, joint)
+    results = _on_target(spec, preset, policies, seed, joint, visitor)
     return [(r, n, per_episode(c, n) if record else None) for (r, n), c in zip(results, calls)]
 
 

@@ -28,10 +28,12 @@ from tatl_mj.description import TaskDescription
 from tatl_mj.experiments.results.records import SHARED_DATA
 from tatl_mj.experiments.run.determinism import derive_seed
 from tatl_mj.experiments.run.evaluation import evaluate_curve, steadiness
+from tatl_mj.experiments.run.premises import PremiseObserver, fd_budgets
 from tatl_mj.experiments.run.problems import Ledger, transfer_problem
 from tatl_mj.experiments.run.source_unit import SourceArtifacts
 from tatl_mj.experiments.spec import ExperimentSpec, Preset, methods_from_spec
 from tatl_mj.transfer import method
+from tatl_mj.transitions import Transitions
 
 
 def _placebo(transfer: Any) -> bool:
@@ -85,7 +87,8 @@ def run_method(
         points.append(point)
         policies.append(policy)
     eval_seed = derive_seed(seed, spec.stream_name, "evaluation")  # same start states for every method
-    curve = _evaluated_curve(spec, preset, problem.target, points, policies, eval_seed)
+    observed = (artifacts.target_stream, derive_seed(seed, spec.stream_name, "premises"))
+    curve = _evaluated_curve(spec, preset, problem.target, points, policies, eval_seed, observed)
     for budget in preset.target_budgets[len(curve) :]:
         curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
     final_used = getattr(policies[-1], "samples_used", None)
@@ -137,18 +140,40 @@ def _evaluated_curve(
     points: list[dict],
     policies: list[Callable],
     eval_seed: int,
+    observed: tuple[Transitions, int] | None = None,
 ) -> list[dict]:
     """The curve's points with their evaluations: every budget's policy in one lockstep batch.
 
     A policy learned at several budgets (the same object) is evaluated once: its
-    episodes are the same at each, from the same starts and noise.
+    episodes are the same at each, from the same starts and noise. ``observed``: the
+    target's sample stream and the seed of the premises' choice of visits; each point
+    gets its policy's premises (None for a policy that is not TA-TL's).
     """
     distinct = list({id(policy): policy for policy in policies}.values())
+    observer = None
+    if observed is not None:
+        fd = set(fd_budgets([p["samples"] for p in points]))
+        blocks = {i for i, p in enumerate(distinct) for q, r in zip(points, policies) if r is p and q["samples"] in fd}
+        observer = PremiseObserver(distinct, sorted(blocks), preset.evaluation_episodes, observed[1])
     start = time.perf_counter()
-    evaluated = evaluate_curve(spec, preset, distinct, eval_seed, bool(target.steadiness))
+    evaluated = evaluate_curve(spec, preset, distinct, eval_seed, bool(target.steadiness), observer)
     evaluate_s = time.perf_counter() - start
+    found: list[dict | None] = [None] * len(distinct)
+    if observer is not None and observer.active:
+        start = time.perf_counter()
+        used = {id(r): q["samples_used"] for q, r in zip(points, policies)}
+        lengths = [n for _, n, _ in evaluated]
+        found = observer.measurements(
+            lengths,
+            target,
+            observed[0],
+            [used[id(p)] for p in distinct],
+            spec.target.task_kwargs,  # type: ignore[index]
+        )
+        evaluate_s += time.perf_counter() - start
     steps = sum(int(n.sum()) for _, n, _ in evaluated)
     of = {id(policy): result for policy, result in zip(distinct, evaluated)}
+    found_of = {id(policy): measured for policy, measured in zip(distinct, found)}
     curve: list[dict] = []
     timed: set[int] = set()
     for point, policy in zip(points, policies):
@@ -169,6 +194,8 @@ def _evaluated_curve(
                 "warnings": point["warnings"],
                 # The lockstep batch's time, shared out by episode steps (at a policy's first budget).
                 "evaluate_s": share,
+                # The theorem's premises on these episodes (TA-TL's policies; None for others).
+                "premises": found_of[id(policy)],
             }
         )
     return curve
