@@ -70,11 +70,14 @@ class PremiseStep:
       requested: (N, mT) ``a_T + K pi_ad`` before any clip or snap; None where the
         policy has no such request (a discrete target's).
       projected: (N, dT) ``s_hat_T_next``, the projected source next state; None where not formed.
+      predicted: (N, dT) the policy's own model's next state for ``action`` (delta's or the
+        misprediction's prediction); None where the observer predicts with ``policy.apprentice``.
     """
 
     action: np.ndarray
     requested: np.ndarray | None = None
     projected: np.ndarray | None = None
+    predicted: np.ndarray | None = None
 
 
 _POLICY: Constraints = {
@@ -243,6 +246,9 @@ class DiscreteTATLPolicy:
         """The method contract's ``premise_step`` hook: ``__call__``'s indices; an index
         is always feasible and the grid's measure is the apprentice's misprediction."""
         return PremiseStep(self(target_states))
+
+    premise_measures: ClassVar[tuple[str, ...]] = ("misprediction",)
+    """The premises measured for it (``run.premises.measures_of``): the grid's delta."""
 
 
 __all__ = ["DiscreteTATLPolicy", "PremiseStep", "SourceStep", "TATLPolicy", "TATLStep"]

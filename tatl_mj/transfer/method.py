@@ -224,9 +224,15 @@ class TransferMethod(Protocol):
       (:func:`joint_decisions` reads it; default: each policy is called on its own);
     - on the returned policy, ``premise_step(states)``: the very decision ``policy(states)``
       gives, as a :class:`~tatl_mj.transfer.algorithm1.PremiseStep` with what the theorem's
-      premises are measured by (the request before clipping, s_hat_next), and attributes
-      ``apprentice`` and ``mapping``; a policy with it is TA-TL's and its evaluation
-      measures the premises (:func:`premise_probe` reads it; default: not measured).
+      premises are measured by (the request before clipping, s_hat_next, its model's
+      prediction), and attribute ``mapping`` (and ``apprentice`` where the step carries no
+      prediction); a policy with it is TA-TL's and its evaluation measures the premises
+      (:func:`premise_probe` reads it; default: not measured). Its optional class attribute
+      ``premise_measures`` names which (``tatl_mj.experiments.run.premises.measures_of``);
+    - on the returned policy, ``premise_together(policies)``: ``decide_together``'s
+      counterpart for the premises, a :data:`JointPremises` whose steps' actions are
+      exactly ``decide_together``'s (:func:`joint_premises` reads it; default: each
+      observed policy's ``premise_step`` on its own).
 
     ``uses_source``, ``ablation_of``, ``baseline``, ``privileged`` and ``source`` are the
     method's roles: the runner, the verdicts and the reports read them from the built
@@ -354,11 +360,22 @@ def joint_decisions(policies: Sequence[Any]) -> JointDecisions | None:
 
 def premise_probe(policy: Any) -> Callable[[np.ndarray], PremiseStep] | None:
     """``policy``'s ``premise_step`` hook (see :class:`TransferMethod`) where it has one and
-    the ``apprentice`` and ``mapping`` it is measured by, else None (no premises measured)."""
+    the ``mapping`` it is measured by, else None (no premises measured)."""
     hook = getattr(policy, "premise_step", None)
-    if hook is None or getattr(policy, "apprentice", None) is None or getattr(policy, "mapping", None) is None:
+    if hook is None or getattr(policy, "mapping", None) is None:
         return None
     return hook
+
+
+JointPremises = Callable[[list[int], list[np.ndarray]], list[PremiseStep]]
+""":data:`JointDecisions` with each block's :class:`PremiseStep` instead of its actions."""
+
+
+def joint_premises(policies: Sequence[Any]) -> JointPremises | None:
+    """The first policy's ``premise_together(policies)`` where it has that hook (see
+    :class:`TransferMethod`), else None: each policy's ``premise_step`` on its own."""
+    hook = getattr(policies[0], "premise_together", None) if policies else None
+    return None if hook is None else hook(policies)
 
 
 def samples_used(policy: Any, budget: int) -> int:
@@ -370,6 +387,7 @@ def samples_used(policy: Any, budget: int) -> int:
 __all__ = [
     "Contract",
     "JointDecisions",
+    "JointPremises",
     "Model",
     "PRIVILEGES",
     "Policy",
@@ -379,6 +397,7 @@ __all__ = [
     "Withheld",
     "contract",
     "joint_decisions",
+    "joint_premises",
     "premise_probe",
     "samples_used",
 ]

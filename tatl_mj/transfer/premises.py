@@ -159,7 +159,13 @@ def misprediction_rate(
     predicted = apprentice.predict(s, actions)
     if snap is not None:
         predicted = snap(predicted)
-    return float(np.mean(~np.all(np.abs(predicted - s_next) <= 1e-9, axis=1)))  # NaN: a miss
+    return mispredicted(predicted, s_next)
+
+
+def mispredicted(predicted: np.ndarray, next_states: np.ndarray) -> float:
+    """The fraction of rows whose ``predicted`` next cell is not the real one (a NaN: a miss)."""
+    p, s_next = _pair(predicted, next_states, ("predicted", "next_states"))
+    return float(np.mean(~np.all(np.abs(p - s_next) <= 1e-9, axis=1)))
 
 
 def finite_difference_B(
@@ -499,6 +505,7 @@ __all__ = [
     "feasibility",
     "finite_difference_B",
     "misprediction_rate",
+    "mispredicted",
     "normalised_errors",
     "one_step_errors",
     "round_trip",

@@ -39,6 +39,26 @@ FD_EPS = 1e-3
 """The central differences' step in actuator units."""
 
 
+MEASURES = tuple(f.name for f in dataclasses.fields(premises.PremiseMeasurements))
+"""Every measure a record's ``premises`` holds."""
+FINITE_DIFFERENCES = ("alpha", "unexplained", "b_spread")
+"""The measures taken on the kept visits (:data:`VISITS` per finite-difference budget)."""
+
+
+def measures_of(policy: Any) -> frozenset[str]:
+    """The measures a policy's premises get: its ``premise_measures`` (names of
+    :class:`~tatl_mj.transfer.premises.PremiseMeasurements`' fields; the method contract),
+    else every one. The rest are null in its records; a declared one is null where its
+    step or target does not give what it is measured by (e.g. tracking without s_hat_next)."""
+    declared = getattr(policy, "premise_measures", None)
+    if declared is None:
+        return frozenset(MEASURES)
+    unknown = sorted(set(declared) - set(MEASURES))
+    if unknown:
+        raise ValueError(f"{type(policy).__name__}.premise_measures names {unknown}: each must be one of {MEASURES}")
+    return frozenset(declared)
+
+
 def fd_budgets(budgets: Sequence[int]) -> tuple[int, ...]:
     """The budgets whose policies get the finite-difference measures: smallest, middle, largest."""
     n = len(budgets)
@@ -50,7 +70,9 @@ class _Block:
     """What one observed policy's episodes showed, call by call."""
 
     probe: Callable[[np.ndarray], Any]
+    measures: frozenset[str]
     calls: list[tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
+    # per call: the requests before clipping, and [projected | predicted] next states
     asked: list[tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     visits: list[tuple[replay.Visit, np.ndarray]] = dataclasses.field(default_factory=list)
     seen: int = 0  # visited states offered to the reservoir so far
@@ -61,7 +83,10 @@ class PremiseObserver:
 
     ``policies`` are the distinct policies evaluated together (blocks in that order);
     ``visit_blocks`` those whose visited states are kept for the finite-difference
-    measures; ``seed`` seeds the reservoir of visits (one choice per unit).
+    measures (only those of policies that declare one); ``seed`` seeds the reservoir of
+    visits (one choice per unit). Where the policies decide together (``decide_together``)
+    and answer the premises together too (``premise_together``), the observed blocks are
+    answered by that joint computation, so the decisions stay the joint path's.
     """
 
     def __init__(self, policies: Sequence[Any], visit_blocks: Sequence[int], n_episodes: int, seed: int):
@@ -71,8 +96,11 @@ class PremiseObserver:
         for b, policy in enumerate(self.policies):
             probe = method.premise_probe(policy)
             if probe is not None:
-                self.blocks[b] = _Block(probe)
-        self.visit_blocks = {b for b in visit_blocks if b in self.blocks}
+                self.blocks[b] = _Block(probe, measures_of(policy))
+        self.together = method.joint_premises(self.policies) if self.blocks else None
+        self.visit_blocks = {
+            b for b in visit_blocks if b in self.blocks and self.blocks[b].measures & set(FINITE_DIFFERENCES)
+        }
         self.random = np.random.default_rng(seed)
 
     @property
@@ -89,18 +117,23 @@ class PremiseObserver:
                 answers = together([b for _, b in rest], [states[k] for k, _ in rest])
                 for (k, _), v in zip(rest, answers):
                     values[k] = v
-            for k, b in enumerate(blocks):
-                block = self.blocks.get(b)
-                if block is None:
-                    continue
-                step = block.probe(states[k])
+            mine = [(k, b) for k, b in enumerate(blocks) if b in self.blocks]
+            if not mine:
+                return values
+            if self.together is not None:  # the joint path's own computation, with its steps
+                steps = self.together([b for _, b in mine], [states[k] for k, _ in mine])
+            else:
+                steps = [self.blocks[b].probe(states[k]) for k, b in mine]
+            for (k, b), step in zip(mine, steps):
+                block = self.blocks[b]
                 values[k] = step.action
                 s = np.array(states[k], dtype=np.float64)
                 block.calls.append((s, np.atleast_2d(np.array(step.action, dtype=np.float64).T).T))
                 nan = np.full_like(block.calls[-1][1], np.nan)
                 requested = nan if step.requested is None else np.array(step.requested, dtype=np.float64)
                 projected = np.full_like(s, np.nan) if step.projected is None else np.array(step.projected)
-                block.asked.append((requested, projected))
+                predicted = np.full_like(s, np.nan) if step.predicted is None else np.array(step.predicted)
+                block.asked.append((requested, np.concatenate([projected, predicted], axis=1)))
             return values
 
         return decide
@@ -191,51 +224,70 @@ def _measure(
     used: int,
     task_kwargs: dict | None,
 ) -> premises.PremiseMeasurements:
-    """One policy's measurements from its observed episodes and kept visits."""
+    """One policy's measurements from its observed episodes and kept visits: those it
+    declares (:func:`measures_of`) and its step and target give."""
     if not block.calls:  # nothing decided through the observer: nothing to measure
         return premises.PremiseMeasurements()
-    apprentice, mapping = policy.apprentice, policy.mapping
+    wanted = block.measures
+    apprentice, mapping = getattr(policy, "apprentice", None), policy.mapping
     periodic = target.periodic if any(target.periodic) else None
     d = target.state_dim
     decided = _episodes(block.calls, lengths)  # per episode: [states | values]
-    asked = _episodes(block.asked, lengths)  # per episode: [requested | projected]
+    asked = _episodes(block.asked, lengths)  # per episode: [requested | projected | predicted]
+    m = decided[0].shape[1] - d
     # Decision t's next state is decision t + 1's state: an episode's last decision has none seen.
     s = np.concatenate([e[:-1, :d] for e in decided])
     a = np.concatenate([e[:-1, d:] for e in decided])
     s_next = np.concatenate([e[1:, :d] for e in decided])
     visited = np.concatenate([e[:, :d] for e in decided])
-    if target.discrete:
-        if not len(s):
-            return premises.PremiseMeasurements()
-        values = target.action_values[a[:, 0].astype(np.int64)]
-        return premises.PremiseMeasurements(
-            misprediction=premises.misprediction_rate(apprentice, s, values, s_next, state_snap(target))
-        )
+    requested = np.concatenate([e[:, :m] for e in asked])
+    applied = np.concatenate([e[:, d:] for e in decided])
+    projected = np.concatenate([e[:-1, m : m + d] for e in asked])
+    predicted = np.concatenate([e[:-1, m + d :] for e in asked])
+    given = bool(len(s)) and not np.all(np.isnan(predicted))  # the policy's own predictions
+    found: dict[str, float | None] = {}
+    if "infeasible" in wanted and not np.all(np.isnan(requested)):
+        if target.discrete:  # an index request: available where it is one of the target's actions
+            low, high = np.zeros(1), np.full(1, target.n_actions - 1.0)
+        else:
+            low, high = target.action_low, target.action_high
+        found["infeasible"] = premises.feasibility(requested, applied, low, high).infeasible
+    if target.discrete and len(s) and "misprediction" in wanted:
+        if given:
+            found["misprediction"] = premises.mispredicted(predicted, s_next)
+        elif apprentice is not None:
+            values = target.action_values[a[:, 0].astype(np.int64)]
+            found["misprediction"] = premises.misprediction_rate(apprentice, s, values, s_next, state_snap(target))
+    if not wanted - {"infeasible", "misprediction"}:
+        return premises.PremiseMeasurements(**found)
     try:
         scale = premises.step_scale(stream.states, stream.next_states, periodic)
     except ValueError:  # a coordinate the stream never moves: nothing to scale by
-        return premises.PremiseMeasurements()
-    m = a.shape[1]
-    requested = np.concatenate([e[:, :m] for e in asked])
-    applied = np.concatenate([e[:, d:] for e in decided])
-    projected = np.concatenate([e[:-1, m:] for e in asked])
-    head = stream.head(max(used, 1))
-    found: dict[str, float | None] = {
-        "delta_stream": premises.one_step_errors(
+        return premises.PremiseMeasurements(**_only(found, wanted))
+    if "round_trip" in wanted:
+        found["round_trip"] = premises.round_trip(mapping, visited, scale, periodic).rms
+    if target.discrete:
+        return premises.PremiseMeasurements(**_only(found, wanted))
+    if apprentice is not None and "delta_stream" in wanted:
+        head = stream.head(max(used, 1))
+        found["delta_stream"] = premises.one_step_errors(
             apprentice, head.states, target.action_values[head.actions], head.next_states, scale, periodic
-        ).rms,
-        "round_trip": premises.round_trip(mapping, visited, scale, periodic).rms,
-    }
+        ).rms
     if len(s):
-        found["delta"] = premises.one_step_errors(apprentice, s, a, s_next, scale, periodic).rms
+        if given:
+            found["delta"] = premises.normalised_errors(predicted, s_next, scale, periodic).rms
+        elif apprentice is not None:
+            found["delta"] = premises.one_step_errors(apprentice, s, a, s_next, scale, periodic).rms
         if not np.all(np.isnan(projected)):
             found["tracking"] = premises.tracking(s_next, projected, scale, periodic).rms
-    if not np.all(np.isnan(requested)):
-        low, high = target.action_low, target.action_high
-        found["infeasible"] = premises.feasibility(requested, applied, low, high).infeasible
-    if block.visits:
+    if block.visits and apprentice is not None:
         found.update(_finite_differences(apprentice, block.visits, target, task_kwargs, scale, periodic))
-    return premises.PremiseMeasurements(**found)
+    return premises.PremiseMeasurements(**_only(found, wanted))
+
+
+def _only(found: dict[str, float | None], wanted: frozenset[str]) -> dict[str, float | None]:
+    """The measures ``wanted`` of those ``found``: the rest stay null."""
+    return {k: v for k, v in found.items() if k in wanted}
 
 
 def _finite_differences(
@@ -267,4 +319,13 @@ def _finite_differences(
     }
 
 
-__all__ = ["DIVERGED", "FD_EPS", "VISITS", "PremiseObserver", "fd_budgets"]
+__all__ = [
+    "DIVERGED",
+    "FD_EPS",
+    "FINITE_DIFFERENCES",
+    "MEASURES",
+    "VISITS",
+    "PremiseObserver",
+    "fd_budgets",
+    "measures_of",
+]

@@ -67,15 +67,15 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import ClassVar, Sequence
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from tatl_mj.transfer.algorithm1 import SourceStep
+from tatl_mj.transfer.algorithm1 import PremiseStep, SourceStep
 from tatl_mj.transfer.features import Periodic, as_states, periodic_difference
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.intertask_mapping import Mapping
-from tatl_mj.transfer.method import JointDecisions
+from tatl_mj.transfer.method import JointDecisions, JointPremises
 from tatl_mj.transfer.methods.linearisation import TargetModel
 from tatl_mj.validation import (
     Array,
@@ -358,10 +358,29 @@ class HorizonTATLPolicy:
         """(N, dT) target states -> (N, mT) target action values."""
         return self.step(target_states).action
 
+    premise_measures: ClassVar[tuple[str, ...]] = ("delta", "infeasible", "round_trip")
+    """The premises measured for it (``run.premises.measures_of``): its model's one-step
+    error, the request's feasibility and the mapping's round trip (no apprentice B_hat
+    or one-step tracking: the rule matches a horizon, not B_hat's one step)."""
+
+    def premise_step(self, target_states: np.ndarray) -> PremiseStep:
+        """The method contract's ``premise_step`` hook: the same decision as ``__call__``
+        (one :meth:`step`), with the request ``a_0 + D`` before clipping and the model's
+        next state for the action taken."""
+        step = self.step(target_states)
+        return self._premise(step.s_T, step.nominal + step.adaptive, step.action)
+
+    def _premise(self, s_T: np.ndarray, requested: np.ndarray, action: np.ndarray) -> PremiseStep:
+        return PremiseStep(action, requested, None, np.asarray(self.model(s_T, action), dtype=np.float64))
+
     def decide_together(self, policies: Sequence[object]) -> JointDecisions | None:
         """The method contract's ``decide_together`` hook (``tatl_mj.transfer.method``),
         called on the first of ``policies``: :func:`shared_decisions`."""
         return shared_decisions(list(policies))
+
+    def premise_together(self, policies: Sequence[object]) -> JointPremises | None:
+        """The method contract's ``premise_together`` hook: :func:`shared_premises`."""
+        return shared_premises(list(policies))
 
 
 _SOURCE_SIDE = ("source_q", "mapping", "source_step", "source_zero", "step_ratio")
@@ -395,11 +414,42 @@ def shared_decisions(policies: list) -> JointDecisions | None:
     source rollout (a tenth of the source queries) and one correction; only the
     responses are each policy's own. None unless there are several such policies.
     """
+    joint = _joint(policies)
+    if joint is None:
+        return None
+
+    def decide(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
+        _, _, action, spans = joint(blocks, states)
+        return [action[a:z] for a, z in spans]
+
+    return decide
+
+
+def shared_premises(policies: list) -> JointPremises | None:
+    """:func:`shared_decisions` with each block's :class:`PremiseStep`: the same computation,
+    so each step's action is bit for bit the joint decision (its model's prediction is
+    taken afterwards, for the premises alone). None where :func:`shared_decisions` is."""
+    joint = _joint(policies)
+    if joint is None:
+        return None
+
+    def steps(blocks: list[int], states: list[np.ndarray]) -> list[PremiseStep]:
+        s_T, requested, action, spans = joint(blocks, states)
+        return [policies[b]._premise(s_T[a:z], requested[a:z], action[a:z]) for b, (a, z) in zip(blocks, spans)]
+
+    return steps
+
+
+def _joint(policies: list) -> Callable | None:
+    """The shared decision: (blocks, states) -> s_T, the requests a_0 + D, the actions, and
+    each block's (start, end) rows; None unless there are several such policies."""
     if len(policies) < 2 or not all(_decide_together(p, policies[0]) for p in policies):
         return None
     first = policies[0]
 
-    def decide(blocks: list[int], states: list[np.ndarray]) -> list[np.ndarray]:
+    def joint(
+        blocks: list[int], states: list[np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[int, int]]]:
         rows = [as_states(s, "target_states") for s in states]
         s_T = np.concatenate(rows)
         first._check_coordinates(s_T.shape[1])
@@ -410,10 +460,10 @@ def shared_decisions(policies: list) -> JointDecisions | None:
         responses = [policies[b]._responses(s_T[a:z], nominal[a:z]) for b, a, z in zip(blocks, starts, ends)]
         free = np.concatenate([f for f, _ in responses])
         control = np.concatenate([g for _, g in responses])
-        _, action = first._correction(references, nominal, free, control)
-        return [action[a:z] for a, z in zip(starts, ends)]
+        adaptive, action = first._correction(references, nominal, free, control)
+        return s_T, nominal + adaptive, action, [(int(a), int(z)) for a, z in zip(starts, ends)]
 
-    return decide
+    return joint
 
 
 def _closed_form(
@@ -436,4 +486,4 @@ def _closed_form(
     return powers, sums, sums @ b, c, b
 
 
-__all__ = ["REFERENCES", "HorizonStep", "HorizonTATLPolicy", "shared_decisions"]
+__all__ = ["REFERENCES", "HorizonStep", "HorizonTATLPolicy", "shared_decisions", "shared_premises"]

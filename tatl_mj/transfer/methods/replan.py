@@ -17,7 +17,7 @@ from typing import ClassVar
 import numpy as np
 
 from tatl_mj.description import CellMap, TaskDescription
-from tatl_mj.transfer.algorithm1 import SourceStep
+from tatl_mj.transfer.algorithm1 import PremiseStep, SourceStep
 from tatl_mj.transfer.features import as_states
 from tatl_mj.transfer.fqi import QFunction
 from tatl_mj.transfer.intertask_mapping import Mapping
@@ -57,6 +57,8 @@ class ReplanPolicy:
       model: the merged model that was planned on.
       visited: (S, A) pairs whose model came from target data.
       samples_used: target samples the apprentice counted, for reports.
+      mapping: chi / chi_plus where the policy read the source (its premises' round
+        trip); None for the source-free ablation (no premises measured).
     """
 
     q: TabularQ
@@ -64,6 +66,13 @@ class ReplanPolicy:
     model: TabularModel
     visited: np.ndarray
     samples_used: int | None = None
+    mapping: Mapping | None = None
+
+    premise_measures: ClassVar[tuple[str, ...]] = ("misprediction", "infeasible", "round_trip")
+    """The premises measured for it (``run.premises.measures_of``): the merged model's
+    misprediction (the grid's delta), feasibility and the mapping's round trip. Its
+    request is an index of the target's own action set, so every request is available
+    and infeasible is 0 by construction: measured, so that a record shows it."""
 
     @property
     def n_actions(self) -> int:
@@ -85,6 +94,14 @@ class ReplanPolicy:
         """(N, d) target states -> (N,) int64 action indices."""
         return self.step(target_states).action
 
+    def premise_step(self, target_states: np.ndarray) -> PremiseStep:
+        """The method contract's ``premise_step`` hook: ``__call__``'s indices (one
+        :meth:`step`), the requested index (the greedy one: the planner asks only for
+        actions the target has) and the merged model's next cell for it."""
+        step = self.step(target_states)
+        predicted = self.cell_map.cells[self.model.next_state[step.cell, step.action]].astype(np.float64)
+        return PremiseStep(step.action, step.action.astype(np.float64)[:, None], None, predicted)
+
 
 def replan(
     apprentice: TabularApprentice,
@@ -92,12 +109,13 @@ def replan(
     gamma: float,
     samples_used: int | None = None,
     tol: float = 1e-10,
+    mapping: Mapping | None = None,
 ) -> ReplanPolicy:
     """``ta-tl-replan``: exact Q-iteration on the apprentice's model with its fallback."""
     if cell_map.n_cells != apprentice.n_cells:
         raise ValueError(f"cell_map has {cell_map.n_cells} cells, the apprentice {apprentice.n_cells}")
     model = apprentice.model()
-    return ReplanPolicy(model.q(gamma, tol), cell_map, model, apprentice.visited, samples_used)
+    return ReplanPolicy(model.q(gamma, tol), cell_map, model, apprentice.visited, samples_used, mapping)
 
 
 # --- The one-step rule with a tabular model (the oracle ablation) ----------------------
@@ -245,7 +263,10 @@ class ReplanTATL:
                 raise ValueError(f"{type(self).__name__}(data='source-policy') needs the problem's policy_samples")
             samples = problem.policy_samples(problem.projected_source_policy(), len(target_samples))
         apprentice = fit_tabular_apprentice(samples, cells, fallback, self.prior_scope)
-        return replan(apprentice, cells, self.gamma, samples_used=len(samples))
+        # The mapping rides along only where the method reads the source (the premises' round
+        # trip): the source-free ablation's problem withholds it.
+        mapping = problem.mapping if self.uses_source else None
+        return replan(apprentice, cells, self.gamma, samples_used=len(samples), mapping=mapping)
 
 
 @dataclasses.dataclass(frozen=True)
