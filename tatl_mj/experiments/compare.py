@@ -74,6 +74,7 @@ COSTS = (
     "timings",
     "learn_s",
     "evaluate_s",
+    "premises_s",
     "kernels",
     "blob_sha256",
     "schema_version",

@@ -90,7 +90,16 @@ def run_method(
     observed = (artifacts.target_stream, derive_seed(seed, spec.stream_name, "premises"))
     curve = _evaluated_curve(spec, preset, problem.target, points, policies, eval_seed, observed)
     for budget in preset.target_budgets[len(curve) :]:
-        curve.append({**curve[-1], "samples": int(budget), "samples_used": 0, "learn_s": 0.0, "evaluate_s": 0.0})
+        curve.append(
+            {
+                **curve[-1],
+                "samples": int(budget),
+                "samples_used": 0,
+                "learn_s": 0.0,
+                "evaluate_s": 0.0,
+                "premises_s": 0.0,
+            }
+        )
     final_used = getattr(policies[-1], "samples_used", None)
     return {
         "experiment": spec.name,
@@ -159,6 +168,7 @@ def _evaluated_curve(
     evaluated = evaluate_curve(spec, preset, distinct, eval_seed, bool(target.steadiness), observer)
     evaluate_s = time.perf_counter() - start
     found: list[dict | None] = [None] * len(distinct)
+    premises_s = 0.0
     if observer is not None and observer.active:
         start = time.perf_counter()
         used = {id(r): q["samples_used"] for q, r in zip(points, policies)}
@@ -170,7 +180,7 @@ def _evaluated_curve(
             [used[id(p)] for p in distinct],
             spec.target.task_kwargs,  # type: ignore[index]
         )
-        evaluate_s += time.perf_counter() - start
+        premises_s = time.perf_counter() - start
     steps = sum(int(n.sum()) for _, n, _ in evaluated)
     of = {id(policy): result for policy, result in zip(distinct, evaluated)}
     found_of = {id(policy): measured for policy, measured in zip(distinct, found)}
@@ -178,7 +188,7 @@ def _evaluated_curve(
     timed: set[int] = set()
     for point, policy in zip(points, policies):
         returns, lengths, calls = of[id(policy)]
-        share = evaluate_s * int(lengths.sum()) / max(steps, 1) if id(policy) not in timed else 0.0
+        weight = int(lengths.sum()) / max(steps, 1) if id(policy) not in timed else 0.0
         timed.add(id(policy))
         steady = {} if calls is None else {"steadiness": steadiness(target, *calls)}
         learned = {k: point[k] for k in ("samples", "samples_used", "target_transitions", "rollout_transitions")}
@@ -193,7 +203,9 @@ def _evaluated_curve(
                 "learn_s": point["learn_s"],
                 "warnings": point["warnings"],
                 # The lockstep batch's time, shared out by episode steps (at a policy's first budget).
-                "evaluate_s": share,
+                "evaluate_s": evaluate_s * weight,
+                # The premises' measuring after it (replays, fits), shared out the same way.
+                "premises_s": premises_s * weight,
                 # The theorem's premises on these episodes (TA-TL's policies; None for others).
                 "premises": found_of[id(policy)],
             }

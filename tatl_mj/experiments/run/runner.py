@@ -305,7 +305,7 @@ def _shared(
 def shared_record(record: dict, unit: Unit, origin: Unit) -> dict:
     """``origin``'s record as ``unit``'s: the same curve, marked as shared, with none of the
     work (its wall time, FQI time, substeps and phase timings are the origin's alone)."""
-    curve = [{**point, "learn_s": 0.0, "evaluate_s": 0.0} for point in record["curve"]]
+    curve = [{**point, "learn_s": 0.0, "evaluate_s": 0.0, "premises_s": 0.0} for point in record["curve"]]
     first = record.get("shared_from", str(origin))
     if first == str(unit):  # its own record was lost and comes back from a copy of it
         first = str(origin)
