@@ -178,7 +178,7 @@ def _evaluated_curve(
             target,
             observed[0],
             [used[id(p)] for p in distinct],
-            spec.target.task_kwargs,  # type: ignore[index]
+            spec.target,
         )
         premises_s = time.perf_counter() - start
     steps = sum(int(n.sum()) for _, n, _ in evaluated)

@@ -27,6 +27,7 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.experiments.run.evaluation import per_episode
+from tatl_mj.experiments.spec.schema import Side
 from tatl_mj.sampling import replay
 from tatl_mj.sampling.simulator import simulator_for
 from tatl_mj.transfer import method, premises
@@ -175,20 +176,21 @@ class PremiseObserver:
         target: TaskDescription,
         stream: Transitions,
         samples_used: Sequence[int],
-        task_kwargs: dict | None = None,
+        side: Side,
     ) -> list[dict | None]:
         """Per block: its premises as a record's JSON object, None where not TA-TL's.
 
         ``lengths`` per block its episodes' lengths; ``samples_used`` per block the
-        stream head its apprentice was fitted on (``delta_stream``); ``task_kwargs`` the
-        target's, for the environment the visits are replayed in."""
+        stream head its apprentice was fitted on (``delta_stream``); ``side`` the spec's
+        target (its domain, as the spec names it, a user's ``module:attribute`` too, task and
+        task_kwargs), for the environment the visits are replayed in."""
         out: list[dict | None] = []
         for b, policy in enumerate(self.policies):
             block = self.blocks.get(b)
             if block is None:
                 out.append(None)
                 continue
-            found = _measure(policy, block, np.asarray(lengths[b]), target, stream, int(samples_used[b]), task_kwargs)
+            found = _measure(policy, block, np.asarray(lengths[b]), target, stream, int(samples_used[b]), side)
             out.append({k: _number(v) for k, v in dataclasses.asdict(found).items()})
         return out
 
@@ -222,7 +224,7 @@ def _measure(
     target: TaskDescription,
     stream: Transitions,
     used: int,
-    task_kwargs: dict | None,
+    side: Side,
 ) -> premises.PremiseMeasurements:
     """One policy's measurements from its observed episodes and kept visits: those it
     declares (:func:`measures_of`) and its step and target give."""
@@ -281,7 +283,7 @@ def _measure(
         if not np.all(np.isnan(projected)):
             found["tracking"] = premises.tracking(s_next, projected, scale, periodic).rms
     if block.visits and apprentice is not None:
-        found.update(_finite_differences(apprentice, block.visits, target, task_kwargs, scale, periodic))
+        found.update(_finite_differences(apprentice, block.visits, target, side, scale, periodic))
     return premises.PremiseMeasurements(**_only(found, wanted))
 
 
@@ -294,13 +296,13 @@ def _finite_differences(
     apprentice: Any,
     visits: list[tuple[replay.Visit, np.ndarray]],
     target: TaskDescription,
-    task_kwargs: dict | None,
+    side: Side,
     scale: np.ndarray,
     periodic: Sequence[bool] | None,
 ) -> dict[str, float]:
     """alpha, control affinity and B(s)'s spread over the kept visits, each replayed in a
     scratch MjData of an environment of its own (the evaluation's are left alone)."""
-    env = simulator_for(target.domain, target.task, task_kwargs, 1).make_env(0)
+    env = simulator_for(side.domain, side.task, side.task_kwargs, 1).make_env(0)
     env.reset()
     data = mujoco.MjData(env.physics.model.ptr)
     low, high = target.action_low, target.action_high
