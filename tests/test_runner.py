@@ -291,3 +291,16 @@ def test_paper_protocol_data_are_collected_once_and_nest_across_budgets():
     assert calls == [300]
     nested(lambda states: policy(states), 50)  # another policy: collected afresh
     assert calls == [300, 300]
+
+
+def test_the_premises_are_timed_on_their_own_and_their_share_printed(tmp_path):
+    spec = tiny_spec()
+    runner.run([spec], "tiny", [0], tmp_path, workers=1, progress=False, methods=["rl", "ta-tl"])
+    table = costs.timings(tmp_path)["ip_to_flipped_ip"]
+    # TA-TL's unit measured premises (a part of its own); rl measured none, so has no such part.
+    assert table["ta-tl premises"] > 0 and "rl premises" not in table
+    text = costs.format_timings({"ip_to_flipped_ip": table})
+    share = 100 * table["ta-tl premises"] / sum(table.values())
+    assert text.splitlines()[-1] == (
+        f"the theorem's premises: {table['ta-tl premises']:.1f} s of {sum(table.values()):.1f} s of work ({share:.1f}%)"
+    )

@@ -13,8 +13,8 @@ from tatl_mj.experiments.results.records import SOURCE_UNIT, RunDirectory, read_
 
 def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
     """Summed seconds per experiment and phase from a run's records (all seeds): source
-    learning, target sampling, mapping, the random reference, and each method's learning
-    and evaluation. What ``tatl run`` prints at its end."""
+    learning, target sampling, mapping, the random reference, and each method's learning,
+    evaluation and premises (where it measured any). What ``tatl run`` prints at its end."""
     out: dict[str, dict[str, float]] = {}
     root = RunDirectory(run_dir).root / "records"
     for path in sorted(root.glob("*/seed*/*.json")):
@@ -28,9 +28,10 @@ def timings(run_dir: str | Path) -> dict[str, dict[str, float]]:
             for key, value in record.get("timings", {}).items():
                 phases[key.removesuffix("_s")] = phases.get(key.removesuffix("_s"), 0.0) + float(value)
             continue
-        for part in ("learn", "evaluate"):
-            key = f"{unit} {part}"
-            phases[key] = phases.get(key, 0.0) + sum(float(p.get(f"{part}_s", 0.0)) for p in record.get("curve", []))
+        for part in ("learn", "evaluate", "premises"):
+            spent = sum(float(p.get(f"{part}_s", 0.0)) for p in record.get("curve", []))
+            if spent or part != "premises":
+                phases[f"{unit} {part}"] = phases.get(f"{unit} {part}", 0.0) + spent
     return out
 
 
@@ -125,7 +126,8 @@ def format_physics(report: dict[str, Any]) -> str:
 
 
 def format_timings(table: dict[str, dict[str, float]]) -> str:
-    """The breakdown as text: per experiment, its phases from the slowest, with their share."""
+    """The breakdown as text: per experiment, its phases from the slowest, with their share; then
+    the theorem's premises' share of the whole run's work (their measuring, timed on its own)."""
     lines = []
     for experiment, phases in table.items():
         total = sum(phases.values()) or 1.0
@@ -133,6 +135,10 @@ def format_timings(table: dict[str, dict[str, float]]) -> str:
         for phase, seconds in sorted(phases.items(), key=lambda kv: -kv[1]):
             if seconds >= 0.05 * total:
                 lines.append(f"  {phase:<32} {seconds:8.1f} s  {100 * seconds / total:4.0f}%")
+    work = sum(sum(phases.values()) for phases in table.values())
+    measured = sum(s for phases in table.values() for phase, s in phases.items() if phase.endswith(" premises"))
+    if measured:
+        lines.append(f"the theorem's premises: {measured:.1f} s of {work:.1f} s of work ({100 * measured / work:.1f}%)")
     return "\n".join(lines)
 
 
