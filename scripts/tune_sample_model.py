@@ -121,9 +121,25 @@ def main() -> None:
     features = plain if chosen["pendulum"] == "plain" else [plain, WIDE["pendulum"]]
     specs = [str(write_variant(out, name, features)) for name in PENDULUM]
     methods = ",".join(f"afs-{k}" for k in SCHEDULES)
-    command = [sys.executable, "-m", "tatl_mj.cli", "run", *specs, "--preset", PRESET, "--seeds", str(len(SEEDS)),
-               "--first-seed", str(SEEDS[0]), "--methods", methods, "--workers", str(args.workers),
-               "--out", str(out / "run")]
+    command = [
+        sys.executable,
+        "-m",
+        "tatl_mj.cli",
+        "run",
+        *specs,
+        "--preset",
+        PRESET,
+        "--seeds",
+        str(len(SEEDS)),
+        "--first-seed",
+        str(SEEDS[0]),
+        "--methods",
+        methods,
+        "--workers",
+        str(args.workers),
+        "--out",
+        str(out / "run"),
+    ]
     print("2. rounds x horizon:", " ".join(command), flush=True)
     subprocess.run(command, check=True)
     summary = json.loads((out / "run" / "summary.json").read_text())

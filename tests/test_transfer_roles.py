@@ -140,7 +140,7 @@ FAMILIES = {
     "bicycle_noise_speed": (5, 5),
     "ip_to_flipped_ip_gain": (11, 11),  # was (8, 8)
     "ip_to_timevarying_ip_amplitude": (10, 10),  # was (7, 7)
-    "cartpole_to_bicycle_affine": (24, 29),  # was (20, 23): no new best-baseline pair on final (rl-reset's is the parent's)
+    "cartpole_to_bicycle_affine": (24, 29),  # was (20, 23); on final rl-reset's pairs are the parent's
     "mc_to_ip_energy": (19, 19),  # was (15, 15): the best-baseline pairs are the parent's
     "mc_to_ip_triplets": (19, 23),  # was (15, 17)
 }
