@@ -39,8 +39,9 @@ def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs):
     for settings in table["methods"].values():
         if "iterations" in settings:
             settings["iterations"] = 5
-    if "apprentice-fqi" in table["methods"]:
-        table["methods"]["apprentice-fqi"]["model_samples"] = 2000
+    for name in ("apprentice-fqi", "apprentice-fqi-samples", "apprentice-fqi-samples-rbf"):
+        if name in table["methods"]:
+            table["methods"][name]["model_samples"] = 2000
     spec = spec_mod.parse_spec(table, f"{name}.toml")
     if target_kwargs:
         target = dataclasses.replace(spec.target, task_kwargs=target_kwargs)

@@ -30,7 +30,15 @@ def _pair() -> tuple[spec_mod.ExperimentSpec, spec_mod.ExperimentSpec]:
 
 
 def test_source_free_built_ins_declare_it_and_transfer_methods_do_not():
-    free = {"rl", "apprentice-fqi", "rl-reset", "rl-online", "apprentice-upright", "replan-no-source"}
+    free = {
+        "rl",
+        "apprentice-fqi",
+        "apprentice-fqi-samples",
+        "rl-reset",
+        "rl-online",
+        "apprentice-upright",
+        "replan-no-source",
+    }
     using = {"ta-tl", "ta-tl-h", "uma-tl", "uma-tl-prior", "uma-tl-reset", "projected-source", "ta-tl-replan"}
     for name in free | using:
         assert method.contract(registry.build(name)).uses_source is (name not in free), name

@@ -10,6 +10,7 @@ import pytest
 from conftest import ROOT
 
 from tatl_mj.experiments import spec as spec_mod
+from tatl_mj.experiments.results import pairs
 
 TASKS = sorted((Path(__file__).resolve().parents[1] / "tasks").glob("*.toml"))
 EXPECTED = {"grid_to_windy", "ip_to_timevarying_ip", "cartpole_to_bicycle", "mc_to_ip", "ip_to_flipped_ip"}
@@ -358,3 +359,22 @@ def test_the_shipped_variants_differ_from_their_parents_by_what_they_say(variant
         parent.presets,
     )
     assert child.mapping != parent.mapping
+
+
+def test_an_ablation_key_names_one_method_or_a_list_of_them():
+    table = _base()
+    table["methods"]["ta-tl-rbf"]["ablation"] = ["apprentice-fqi-rbf", "apprentice-fqi"]
+    spec = spec_mod.parse_spec(table, "ok.toml")
+    assert ("ta-tl-rbf", "apprentice-fqi") in pairs.ablation_pairs(spec.methods)
+    assert ("ta-tl-rbf", "apprentice-fqi-rbf") in pairs.ablation_pairs(spec.methods)
+    names = sorted(table["methods"])
+    expected = "the name of another method of this spec, or a list of such names without repeats,"
+    for bad in ([], ["apprentice-fqi-rbf", "apprentice-fqi-rbf"], ["apprentice-fqi-rbf", "nope"], ["ta-tl-rbf"], 3):
+        table["methods"]["ta-tl-rbf"]["ablation"] = bad
+        assert _error(table) == f"bad.toml: key 'methods.ta-tl-rbf.ablation' must be {expected} {names}, got {bad!r}"
+    table["methods"]["ta-tl-rbf"]["ablation"] = "apprentice-fqi-rbf"
+    table["methods"]["ta-tl"]["placebo"] = ["ta-tl-placebo"]  # a placebo is one name
+    assert _error(table) == (
+        f"bad.toml: key 'methods.ta-tl.placebo' must be the name of another method of this spec {names}, "
+        "got ['ta-tl-placebo']"
+    )

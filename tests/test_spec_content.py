@@ -36,9 +36,13 @@ def test_a_reformatted_spec_keeps_its_hash(tmp_path):
     assert re.fullmatch(r"[0-9a-f]{64}", spec_mod.content_hash(original))
 
 
-def _inline(value: dict) -> str:
-    parts = [f'"{k}" = {_inline(v) if isinstance(v, dict) else json.dumps(v)}' for k, v in value.items()]
-    return "{ " + ", ".join(parts) + " }"
+def _inline(value) -> str:
+    """TOML for a value: inline tables, and lists of them (a list of features specs), as such."""
+    if isinstance(value, list):
+        return "[" + ", ".join(_inline(v) for v in value) + "]"
+    if not isinstance(value, dict):
+        return json.dumps(value)
+    return "{ " + ", ".join(f'"{k}" = {_inline(v)}' for k, v in value.items()) + " }"
 
 
 def test_a_changed_setting_changes_the_hash_and_another_preset_does_not_matter():

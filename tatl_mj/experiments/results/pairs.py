@@ -4,8 +4,8 @@ A pair is (method, other, role): a transfer method against its source-free **abl
 itself on a **placebo** source, or any method against the experiment's frozen **best baseline**.
 The pairs are declared by the spec, not by which methods a run happens to hold:
 
-- ablation: a method table's ``ablation = "NAME"`` key, else the methods whose ``ablation_of``
-  names the built-in (or plug-in) the table builds: every built-in's own table among them, else,
+- ablation: a method table's ``ablation = "NAME"`` (or ``["NAME", ...]``) key, else the methods
+  whose ``ablation_of`` names the built-in (or plug-in) the table builds: every built-in's own table among them, else,
   where the spec lists only variants, every variant of the first one's built-in;
 - placebo: a method table's ``placebo = "NAME"`` key, else the table of the same built-in
   whose method declares ``source = "placebo"`` and whose settings are otherwise the same;
@@ -74,8 +74,8 @@ def _base(name: str, settings: Mapping[str, Any] | None) -> str | None:
 def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
     """(transfer method, its source-free ablation) for every such pair a spec declares.
 
-    A table's ``ablation`` key names it; otherwise a method that uses the source, on its trained
-    source, pairs with the methods that declare themselves the ablation of its built-in
+    A table's ``ablation`` key names it (a list: each of them); otherwise a method that uses
+    the source, on its trained source, pairs with the methods that declare themselves the ablation of its built-in
     (``ablation_of``; a variant, ``method = "ta-tl"``, pairs as its built-in): of those, every
     built-in's own table the spec lists (``ta-tl`` against both ``apprentice-fqi`` and
     ``apprentice-fqi-samples`` where the spec lists both), else, where it lists only variants,
@@ -88,7 +88,8 @@ def ablation_pairs(spec_methods: Mapping[str, Any]) -> list[tuple[str, str]]:
     for name, b in bases.items():
         settings = spec_methods.get(name) or {}
         if settings.get("ablation"):
-            pairs.append((name, str(settings["ablation"])))
+            declared = settings["ablation"]
+            pairs.extend((name, str(other)) for other in (declared if isinstance(declared, list) else [declared]))
             continue
         if held[name].source == "placebo" or not held[name].uses_source or b is None:
             continue

@@ -136,11 +136,11 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
         if not isinstance(settings, dict):
             fail(p, f"methods.{name}", "a table of settings", settings)
         for key in roles.PAIR_KEYS:
-            other = settings.get(key)
-            if key in settings and (not isinstance(other, str) or other not in spec.methods or other == name):
-                fail(
-                    p, f"methods.{name}.{key}", f"the name of another method of this spec {sorted(spec.methods)}", other
-                )
+            if key in settings and not _names_other_methods(spec, name, settings[key], many=key == "ablation"):
+                what = "the name of another method of this spec"
+                if key == "ablation":
+                    what += ", or a list of such names without repeats,"
+                fail(p, f"methods.{name}.{key}", f"{what} {sorted(spec.methods)}", settings[key])
         try:
             check = contract(registry.resolve(name, settings)).check
             if check is not None:
@@ -157,6 +157,15 @@ def _check_methods(spec: ExperimentSpec, source: Any, target: Any) -> None:
             raise SpecError(f"{p}: unknown key 'best_baseline.{question}'; valid keys: ['efficiency', 'final']")
         if not isinstance(baseline, str) or baseline not in spec.methods:
             fail(p, f"best_baseline.{question}", f"a method of this spec {sorted(spec.methods)}", baseline)
+
+
+def _names_other_methods(spec: ExperimentSpec, name: str, value: Any, many: bool) -> bool:
+    """Whether a pair key's value names other methods of the spec: one name, or (``many``, the
+    ``ablation`` key) a non-empty list of distinct names."""
+    names = value if many and isinstance(value, list) and value else [value]
+    return len(set(map(repr, names))) == len(names) and all(
+        isinstance(other, str) and other in spec.methods and other != name for other in names
+    )
 
 
 def _check_sweep(spec: ExperimentSpec) -> None:
