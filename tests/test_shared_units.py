@@ -17,7 +17,7 @@ COSTS = {"wall_s", "fqi_s", "physics_substeps", "shared_from"}
 
 
 def _result(record: dict) -> dict:
-    curve = [{k: v for k, v in p.items() if k not in ("learn_s", "evaluate_s")} for p in record["curve"]]
+    curve = [{k: v for k, v in p.items() if k not in ("learn_s", "evaluate_s", "premises_s")} for p in record["curve"]]
     return {**{k: v for k, v in record.items() if k not in COSTS}, "curve": curve}
 
 
@@ -85,7 +85,7 @@ def test_shared_units_run_once_and_equal_the_variant_run_alone(tmp_path):
     origin = records.read_json(pair.record_path(parent.name, 0, "rl"))
     assert copy["shared_from"] == "ip_to_flipped_ip/seed0/rl" and "shared_from" not in origin
     assert copy["wall_s"] == copy["fqi_s"] == 0.0 and copy["physics_substeps"] == {} and origin["wall_s"] > 0
-    assert all(p["learn_s"] == p["evaluate_s"] == 0.0 for p in copy["curve"])
+    assert all(p["learn_s"] == p["evaluate_s"] == p["premises_s"] == 0.0 for p in copy["curve"])
     assert both["experiments"][variant.name]["methods"]["rl"]["shared_from"] == {"0": "ip_to_flipped_ip/seed0/rl"}
     assert both["experiments"][variant.name]["methods"]["ta-tl"]["shared_from"] == {}
     assert {k: v for k, v in _result(copy).items() if k != "experiment"} == {
