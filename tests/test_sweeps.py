@@ -84,6 +84,22 @@ def test_the_credit_of_a_method_against_itself_sits_at_one_half():
     )
 
 
+def test_a_credit_maps_privileged_comparator_is_labelled_information_and_comes_after():
+    scores = np.random.default_rng(0).normal(size=10)
+    answer = verdicts.answer(scores, scores.copy()).as_dict()
+    judged = [
+        {"method": "ta-tl-no-alg2", "other": other, "role": "ablation", "final": answer, "efficiency": answer}
+        for other in ("apprentice-fqi", "apprentice-fqi-samples")
+    ]
+    methods = {"ta-tl-no-alg2": {"method": "ta-tl", "zeta": None}, "apprentice-fqi": {}, "apprentice-fqi-samples": {}}
+    experiment = Experiment.from_json("toy", {"verdicts": judged, "methods": {}, "spec": {"methods": methods}})
+    header = tables.credit_table("toy", [({"gain": 1.0}, experiment)]).splitlines()[2]
+    assert header == (
+        "| gain | `ta-tl-no-alg2` > `apprentice-fqi-samples`: final; efficiency | `ta-tl-no-alg2` > "
+        "`apprentice-fqi` (privileged) (information: does not credit or discredit transfer): final; efficiency |"
+    )
+
+
 def typed(exp: dict) -> Experiment:
     """A hand-made experiment of a summary, each method with no seed but its ``final_iqm``."""
     curve = {"samples": [], "mean_return": [], "target_transitions": [], "rollout_transitions": []}

@@ -427,9 +427,19 @@ def aggregate_table(summary: Summary) -> str:
 def credit_table(name: str, cells: list[tuple[dict, Experiment]]) -> str:
     """Per sweep condition, each transfer method against its ablation and placebo, both questions."""
     credit = (verdicts.ABLATION, verdicts.PLACEBO)
-    keys = sorted({(v.method, v.other) for _, exp in cells for v in exp.verdicts or () if v.role in credit})
+    marked = privileged(cells[0][1].spec_methods)
+    keys = sorted(
+        {(v.method, v.other) for _, exp in cells for v in exp.verdicts or () if v.role in credit},
+        key=lambda k: (k[0], not no_more_resources(marked, *k), k[1]),
+    )
     params = list(cells[0][0])
-    header = "| " + " | ".join(params) + " | " + " | ".join(f"`{m}` > `{a}`: final; efficiency" for m, a in keys) + " |"
+    header = (
+        "| "
+        + " | ".join(params)
+        + " | "
+        + " | ".join(f"{_pair_heading(m, a, marked)}: final; efficiency" for m, a in keys)
+        + " |"
+    )
     lines = [f"### Credit map: `{name}`", "", header, "|---" * (len(params) + len(keys)) + "|"]
     for condition, exp in cells:
         found = {(v.method, v.other): v for v in exp.verdicts or ()}
@@ -443,6 +453,13 @@ def credit_table(name: str, cells: list[tuple[dict, Experiment]]) -> str:
             row.append("; ".join(parts))
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines + [""])
+
+
+def _pair_heading(method: str, other: str, marked: Mapping[str, frozenset[str]]) -> str:
+    """``method`` > ``other``, each side labelled privileged where it is, and the pair marked as
+    information where the comparator holds a privilege the method lacks (:func:`credits`)."""
+    note = "" if no_more_resources(marked, method, other) else f" ({INFORMATION}: {NOT_CREDIT})"
+    return f"{method_cell(method, marked)} > {method_cell(other, marked)}{note}"
 
 
 # --- the headline tables --------------------------------------------------------------
