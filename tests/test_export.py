@@ -32,7 +32,11 @@ def test_the_export_round_trips_against_the_records(tiny_reference, tmp_path):
         assert int(row["apprentice_samples"]) == point["samples_used"]
         assert float(row["mean_steps"]) == point["mean_steps"]
         assert row["data"] == record["data"] and row["kernels"] == record["kernels"]
-        assert (row["preset"], row["tatl_mj_version"], int(row["schema_version"])) == ("tiny", "0.1.0", records.SCHEMA_VERSION)
+        assert (row["preset"], row["tatl_mj_version"], int(row["schema_version"])) == (
+            "tiny",
+            "0.1.0",
+            records.SCHEMA_VERSION,
+        )
         assert row["dynamics"] == "pendulum/swingup=1 pendulum/swingup_flipped=1"
         # The normalised score is the summary's, seed by seed and budget by budget.
         data = experiment["methods"][row["method"]]

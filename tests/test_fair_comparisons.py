@@ -295,13 +295,11 @@ def test_every_spec_lists_the_fair_baselines_and_ablations(path):
         for name in ("rl-reset", "rl-online"):
             assert methods[name][key] == value
     assert methods["ta-tl-continuous"] == {**methods["ta-tl"], "method": "ta-tl", "actions": "continuous"}
-<<<<<<< HEAD
     # Algorithm 2's two-sided relative gap, a labelled variant at ta-tl's settings (zeta not tuned).
     assert ("ta-tl-relative" in methods) == ("ta-tl-no-alg2" in methods)
     if "ta-tl-relative" in methods:
         assert methods["ta-tl-relative"] == {**methods["ta-tl"], "method": "ta-tl", "gap": "relative"}
         assert methods["ta-tl-relative"]["zeta"] == 0.1
-=======
     # Where ta-tl is judged against apprentice-fqi, also against the non-privileged comparator,
     # with the same apprentice and the RL baseline's learner.
     assert ("ta-tl", "apprentice-fqi-samples") in pairs.ablation_pairs(methods)
@@ -311,7 +309,6 @@ def test_every_spec_lists_the_fair_baselines_and_ablations(path):
     rbf = methods["ta-tl-rbf"]
     assert rbf["ablation"] == ["apprentice-fqi-rbf", "apprentice-fqi-samples-rbf"]
     assert methods["apprentice-fqi-samples-rbf"]["apprentice"] == rbf["apprentice"]
->>>>>>> i68s
 
 
 def test_new_methods_are_registered_and_source_free_where_they_say():

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import types
 
-from tatl_mj.experiments.report import tables
+from tatl_mj.experiments.report import privileges, tables
 from tatl_mj.experiments.results.summary_data import Answer, Curve, Interval, PairVerdict
 
 METHODS = {
@@ -79,8 +79,8 @@ def test_a_privileged_comparators_verdict_is_information_and_the_non_privileged_
     # The continuous reading has more actions than its comparators.
     assert continuous_samples[4] == "**credited** (more actions than its comparator)"
     assert continuous_fqi[4] == "**worse** (information; more actions than its comparator)"
-    assert tables.credits(_summary().experiments["e"].verdicts[3], tables.privileged(METHODS))
-    assert not tables.credits(_summary().experiments["e"].verdicts[1], tables.privileged(METHODS))
+    assert privileges.credits(_summary().experiments["e"].verdicts[3], privileges.privileged(METHODS))
+    assert not privileges.credits(_summary().experiments["e"].verdicts[1], privileges.privileged(METHODS))
 
 
 def test_the_readings_are_declared_once_and_credit_reads_the_same_actions():
@@ -131,7 +131,7 @@ def test_a_verdict_credits_only_against_a_comparator_with_no_privilege_the_metho
         "rl-reset": {},
         "rl": {},
     }
-    marked = tables.privileged(methods)
+    marked = privileges.privileged(methods)
     assert marked == {
         "ta-tl": frozenset({"reward function"}),
         "apprentice-fqi": frozenset({"reward function", "reset box"}),
@@ -139,7 +139,7 @@ def test_a_verdict_credits_only_against_a_comparator_with_no_privilege_the_metho
         "rl-reset": frozenset({"resets"}),
     }
     credit = {
-        (m, o): tables.credits(_pair(m, o, "ablation", "worse"), marked)
+        (m, o): privileges.credits(_pair(m, o, "ablation", "worse"), marked)
         for m, o in [
             ("ta-tl", "apprentice-fqi-samples"),  # none held: credits
             ("ta-tl-no-alg2", "apprentice-fqi-samples"),

@@ -184,15 +184,15 @@ def test_algorithm2_makes_ta_tl_privileged_and_without_it_it_is_not():
 
 
 def test_the_verdict_tables_label_every_privileged_side():
-    from tatl_mj.experiments.report import tables
+    from tatl_mj.experiments.report import privileges
     from tatl_mj.experiments.results.summary_data import PairVerdict
 
     methods = {"ta-tl": {}, "ta-tl-no-alg2": {"method": "ta-tl", "zeta": None}, "apprentice-fqi": {}, "rl": {}}
-    marked = tables.privileged(methods)
+    marked = privileges.privileged(methods)
     assert set(marked) == {"ta-tl", "apprentice-fqi"}
     pair = PairVerdict("ta-tl-no-alg2", "apprentice-fqi", "ablation", False, None, None, None)
-    assert tables.against(pair, marked) == (
+    assert privileges.against(pair, marked) == (
         "`apprentice-fqi` (source-free, privileged: does not credit or discredit transfer)"
     )
-    assert tables.method_cell("ta-tl-no-alg2", marked) == "`ta-tl-no-alg2`"
-    assert tables.method_cell("ta-tl", marked) == "`ta-tl` (privileged)"
+    assert privileges.method_cell("ta-tl-no-alg2", marked) == "`ta-tl-no-alg2`"
+    assert privileges.method_cell("ta-tl", marked) == "`ta-tl` (privileged)"

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.report import tables
+from tatl_mj.experiments.report import privileges
 from tatl_mj.experiments.results import verdicts
 
 NEAR_RANDOM = 0.1
@@ -113,16 +113,16 @@ def table(summary: Mapping[str, Any], methods: Sequence[str]) -> list[str]:
         "|---|---|---|---|---|---|",
     ]
     marked = {
-        name: tables.privileged((experiment.get("spec") or {}).get("methods") or {})
+        name: privileges.privileged((experiment.get("spec") or {}).get("methods") or {})
         for name, experiment in summary["experiments"].items()
     }
     for row in found:
         notes = [f"both near random (median final score < {NEAR_RANDOM:g})"] if row["near_random"] else []
         held = marked[row["experiment"]]
-        if not tables.no_more_resources(held, row["method"], row["other"]):
-            notes.append(f"privileged comparator: {tables.NOT_CREDIT}")
+        if not privileges.no_more_resources(held, row["method"], row["other"]):
+            notes.append(f"privileged comparator: {privileges.NOT_CREDIT}")
         note = "; ".join(notes)
-        role = row["role"] + (f", {tables.PRIVILEGED}" if row["other"] in held else "")
+        role = row["role"] + (f", {privileges.PRIVILEGED}" if row["other"] in held else "")
         lines.append(
             f"| {row['experiment']} | `{row['method']}` | `{row['other']}` ({role}) | "
             f"{_cell(row.get(verdicts.FINAL))} | {_cell(row.get(verdicts.EFFICIENCY))} | {note} |"

@@ -214,7 +214,7 @@ class TransferMethod(Protocol):
     - ``privileges``: which of those it uses, named from :data:`PRIVILEGES` (default: none;
       a method that says ``privileged`` and names none holds ``"unnamed"``). A verdict credits
       transfer only against a comparator whose privileges the method holds too
-      (``tatl_mj.experiments.report.tables.credits``);
+      (``tatl_mj.experiments.report.privileges.credits``);
     - on the returned policy, ``samples_used``: how many of the n shared samples
       it kept (Algorithm 2 may stop early; default n);
     - on the returned policy, ``decide_together(policies)``: called on the first of

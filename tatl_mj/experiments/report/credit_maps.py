@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tatl_mj.experiments.report import tables
+from tatl_mj.experiments.report import privileges
 from tatl_mj.experiments.report.figures import LINE_STYLES, axis_limits, mark_clipped
 from tatl_mj.experiments.report.style import method_colors, order
 from tatl_mj.experiments.results import verdicts
@@ -78,11 +78,13 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
     params = list(cells[0][0])
     fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4))
     pairs = sorted({(p.role, p.method, p.other) for _, exp in cells for p in _credit_pairs(exp)})
-    marked = tables.privileged(cells[0][1].spec_methods)
+    marked = privileges.privileged(cells[0][1].spec_methods)
 
     def pair_label(key: tuple) -> str:
-        # A privileged comparator's pair is information (tables.credits), said where it is drawn.
-        return f"{key[1]} > {key[2]}" + ("" if tables.no_more_resources(marked, key[1], key[2]) else " [privileged]")
+        # A privileged comparator's pair is information (privileges.credits), said where it is drawn.
+        return f"{key[1]} > {key[2]}" + (
+            "" if privileges.no_more_resources(marked, key[1], key[2]) else " [privileged]"
+        )
 
     methods = sorted({m for _, exp in cells for m, d in exp.methods.items() if d.final_iqm is not None}, key=order)
     colors = method_colors(methods)

@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from tatl_mj.experiments.report import tables
 from tatl_mj.experiments.results.summary_data import Summary
 from tatl_mj.transfer import premises
 
-WHY_METHODS = ("ta-tl", "ta-tl-continuous")
-"""The methods the "why" table explains, in its order."""
+WHY_METHODS = (*tables.READINGS, "ta-tl-h", "ta-tl-replan")
+"""The methods the "why" table explains, in its order: both readings of TA-TL's action, then the
+bicycle's horizon-matched and the grid's replanning TA-TL."""
 MEASURES = tuple(f.name for f in dataclasses.fields(premises.PremiseMeasurements))
 """Every measure a record's ``premises`` holds."""
 
