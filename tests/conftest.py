@@ -39,9 +39,9 @@ def tiny_spec(name: str = "ip_to_flipped_ip", **target_kwargs):
     for settings in table["methods"].values():
         if "iterations" in settings:
             settings["iterations"] = 5
-    for name in ("apprentice-fqi", "apprentice-fqi-samples", "apprentice-fqi-samples-rbf"):
-        if name in table["methods"]:
-            table["methods"][name]["model_samples"] = 2000
+    for learner in ("apprentice-fqi", "apprentice-fqi-samples", "apprentice-fqi-samples-rbf"):
+        if learner in table["methods"]:
+            table["methods"][learner]["model_samples"] = 2000
     spec = spec_mod.parse_spec(table, f"{name}.toml")
     if target_kwargs:
         target = dataclasses.replace(spec.target, task_kwargs=target_kwargs)
