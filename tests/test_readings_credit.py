@@ -173,3 +173,9 @@ def test_privileges_are_named_from_the_declared_list_and_checked_once():
     for bad in (("reward",), "resets"):
         with pytest.raises(ValueError, match=r"method 'mine' declares privileges .*: each must be one of \["):
             contract(types.SimpleNamespace(name="mine", privileges=bad))
+
+
+def test_the_credit_table_can_be_limited_to_named_experiments():
+    everything = tables.verdict_table(_summary(), methods=tables.READINGS).splitlines()
+    assert tables.verdict_table(_summary(), methods=tables.READINGS, experiments=["e"]).splitlines() == everything
+    assert tables.verdict_table(_summary(), methods=tables.READINGS, experiments=[]).splitlines() == everything[:2]

@@ -435,10 +435,12 @@ def verdict_table(
     roles: Sequence[str] = (verdicts.ABLATION, verdicts.PLACEBO),
     methods: Sequence[str] | None = None,
     credited_only: bool = False,
+    experiments: Sequence[str] | None = None,
 ) -> str:
     """One row per declared pair of the given roles whose method starts with ``prefix`` (or is one of
     ``methods``), both questions: the README's credit tables (a variant's pairs that are its
     parent's are left out). ``credited_only``: only pairs credited (or better) on either question.
+    ``experiments``: only these (default: every one).
     Per experiment the rows go by method (``methods``' order), each method's non-privileged
     comparator before the privileged one beside it; a verdict against a privileged comparator is
     printed as information (:func:`credits`), and one of a reading with more actions than its
@@ -448,7 +450,9 @@ def verdict_table(
         "| efficiency, paper's accounting | normalised final score, method / against |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for exp in summary.experiments.values():
+    for name, exp in summary.experiments.items():
+        if experiments is not None and name not in experiments:
+            continue
         title = exp.spec.get("title", exp.spec["name"])
         marked = privileged(exp.spec_methods)
         for pair in ordered(exp.verdicts or (), marked, methods or ()):
