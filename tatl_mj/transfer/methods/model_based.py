@@ -1,14 +1,18 @@
-"""``apprentice-fqi``: TA-TL's own apprentice without the source, the ablation of ``ta-tl``.
+"""``apprentice-fqi``: TA-TL's own apprentice without the source, a **privileged** ablation of ``ta-tl``.
 
 It fits the same least-squares apprentice ``s' = W phi(s) + B a`` as TA-TL (the
 same basis, on the same target samples), then solves the target by FQI on
 transitions the apprentice predicts from states spread over the target's reset
 box, each scored by the target task's own reward and end condition. No source
-Q, mapping or source simulator is used anywhere, so a TA-TL win over it is a
-win of the source's content; a loss says a model-based learner does at least as
-well with the same target data. The model's transitions are not target samples
-(they cost no real-target step); the target samples it learns from are counted
-as every method's are.
+Q, mapping or source simulator is used anywhere. It is privileged: it queries the
+target's reward function at states of its choosing, from the whole reset box
+(``privileges``: ``reward function``, ``reset box``), which a robot lacks and
+``ta-tl`` does not have, so a verdict against it does not credit or discredit
+transfer; the comparator that does is ``apprentice-fqi-samples``
+(``tatl_mj.transfer.methods.sample_model``), which learns the reward from the
+samples. The model's transitions are not target samples (they cost no
+real-target step); the target samples it learns from are counted as every
+method's are.
 """
 
 from __future__ import annotations
