@@ -2,7 +2,7 @@
 ``best_baseline`` line its spec freezes (``verdicts.choose_best_baseline``: the baseline with
 the highest IQM of the question's per-seed statistic; ties to the one listed first).
 
-    tatl run tasks/*.toml tasks/variants/*.toml --preset paper --seeds 5 --first-seed 0 --out runs/tuning
+    tatl run tasks/*.toml tasks/variants/*.toml --preset paper --seeds 10 --first-seed 0 --out runs/tuning
     python scripts/best_baseline.py runs/tuning/summary.json
 """
 
