@@ -36,6 +36,10 @@ def blocks(paper: Summary, sweeps: Summary) -> dict[tuple[str, str], str]:
         ("docs/credit.md", "credit-tables"): credit,
         # Only a reference set with premises (record schema 3) has a "why" table: else the block is empty.
         ("docs/results-paper.md", "why"): premises.why_table(paper),
+        # The README's: the same-actions reading (and the bicycle's ta-tl-h) on the paper's five.
+        ("README.md", "why"): premises.why_table(
+            paper, (tables.CREDIT_READING, "ta-tl-h", "ta-tl-replan"), _paper_five(paper)
+        ),
     }
 
 

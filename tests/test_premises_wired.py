@@ -91,6 +91,11 @@ def test_the_why_table_names_each_failing_premise_against_its_threshold():
     assert "| e | ta-tl | 2 | infeasible 0.97 > 0.5 |" in table
     assert "| e | ta-tl-continuous | 2 | none fails |" in table
     assert "rl" not in table
+    # Only the methods and experiments asked for (the README's: the same-actions reading).
+    assert report.why_table(summary, ("ta-tl",), ["e"]).splitlines()[2:] == [
+        "| e | ta-tl | 2 | infeasible 0.97 > 0.5 |"
+    ]
+    assert report.why_table(summary, ("ta-tl",), []) == ""
 
 
 def test_no_premises_no_table_and_no_figure(tmp_path):

@@ -53,11 +53,15 @@ def _median(values: Sequence[float | None]) -> float | None:
     return float(np.median(present)) if present else None
 
 
-def aggregate(summary: Summary, methods: Sequence[str] | None = None) -> list[PremiseRow]:
-    """Per experiment (summary order) and method with premises (``methods``: only these,
-    in that order), the medians at the largest budget and the failed premises."""
+def aggregate(
+    summary: Summary, methods: Sequence[str] | None = None, experiments: Sequence[str] | None = None
+) -> list[PremiseRow]:
+    """Per experiment (summary order; ``experiments``: only these) and method with premises
+    (``methods``: only these, in that order), the medians at the largest budget and the failed premises."""
     rows = []
     for name, experiment in summary.experiments.items():
+        if experiments is not None and name not in experiments:
+            continue
         names = [m for m in (methods or experiment.methods) if m in experiment.methods]
         for method in names:
             per_seed = experiment.methods[method].premises
@@ -86,11 +90,11 @@ def why_line(row: PremiseRow, thresholds: premises.PremiseThresholds = premises.
     return "; ".join(parts)
 
 
-def why_table(summary: Summary, methods: Sequence[str] = WHY_METHODS) -> str:
+def why_table(summary: Summary, methods: Sequence[str] = WHY_METHODS, experiments: Sequence[str] | None = None) -> str:
     """The markdown "why" table: one line per experiment and method, the premises it fails
     (median over seeds at the largest budget) against their thresholds. Empty where the
     summary has no premises."""
-    rows = aggregate(summary, methods)
+    rows = aggregate(summary, methods, experiments)
     if not rows:
         return ""
     lines = [
