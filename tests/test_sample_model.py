@@ -223,3 +223,29 @@ def test_settings_it_cannot_take_are_refused_in_one_line():
     built = registry.build("apprentice-fqi-samples", {"reward_features": list(both), "starts": "all"})
     assert built.reward_features == both and built.starts == "all"
     built.check(target, target)
+
+
+def test_the_reward_error_script_gives_what_the_unit_measures():
+    # scripts/reward_errors.py recomputes each unit's held-out reward error without learning a
+    # policy; it must be the very number the learned policy reports.
+    import importlib.util
+    from pathlib import Path
+
+    from conftest import tiny_spec
+
+    from tatl_mj.experiments.run import method_unit, source_unit
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "reward_errors.py"
+    loader = importlib.util.spec_from_file_location("reward_errors", path)
+    script = importlib.util.module_from_spec(loader)
+    loader.loader.exec_module(script)
+    spec = tiny_spec()
+    preset = spec.preset("tiny")
+    artifacts = source_unit.learn_source(spec, preset, 3)
+    recomputed = script.reward_errors(spec, "tiny", "apprentice-fqi-samples", 3)
+    for budget, errors in zip(preset.target_budgets, recomputed):
+        learner = dataclasses.replace(
+            registry.resolve("apprentice-fqi-samples", dict(spec.methods["apprentice-fqi-samples"])), rounds=0
+        )
+        policy = method_unit.learned_policy(spec, preset, 3, learner, artifacts, budget)
+        assert policy.reward_errors == errors and errors.reward_rmse is not None
