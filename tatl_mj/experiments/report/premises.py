@@ -142,9 +142,10 @@ def premises_figure(summary: Summary, path: str | Path, methods: Sequence[str] =
     for ax in list(axes.flat)[len(shown) :]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=len(names), frameon=False)
-    fig.suptitle("The theorem's premises (median over seeds, largest budget; dashed: threshold)", y=0.99, fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    # The title on top, the legend under it, the panels below both (none overlapping).
+    fig.suptitle("The theorem's premises (median over seeds, largest budget; dashed: threshold)", y=0.995, fontsize=9)
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.955), ncol=len(names), frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
