@@ -17,8 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tatl_mj.experiments.run.determinism import derive_seed
-from tatl_mj.experiments.run.sides import description_of, random_transitions
+from tatl_mj.experiments.run.problems import learning_seed
+from tatl_mj.experiments.run.sides import description_of
+from tatl_mj.experiments.run.source_unit import target_stream
 from tatl_mj.experiments.spec import ExperimentSpec, load_spec, methods_from_spec
 from tatl_mj.transfer.methods.sample_model import ApprenticeFQISamples
 from tatl_mj.transfer.reward_model import HeldOutErrors, held_out_errors, reward_bases
@@ -29,13 +30,12 @@ def reward_errors(spec: ExperimentSpec, preset: str, method: str, seed: int) -> 
     chosen = spec.preset(preset)
     learner = methods_from_spec(spec, chosen, [method])[method]
     target = description_of(spec.target)
-    size = max(max(chosen.target_budgets), chosen.alignment_samples)
-    stream = random_transitions(spec.target, size, derive_seed(seed, spec.stream_name, "target-data"))
+    stream = target_stream(spec, chosen, seed)
     bases = reward_bases(learner.reward_basis, target.state_dim)
     out = []
     for budget in chosen.target_budgets:
         # The unit's own generator, first drawn from by the holdout (ApprenticeFQISamples.learn).
-        rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "target-learning"))
+        rng = np.random.default_rng(learning_seed(spec, seed))
         fit = (bases, learner.reward_inputs, target.n_actions, learner.reward_ridge)
         out.append(held_out_errors(stream.head(budget), *fit, holdout=learner.holdout, rng=rng))
     return out

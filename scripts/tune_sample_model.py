@@ -25,8 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tatl_mj.experiments.run.determinism import derive_seed
-from tatl_mj.experiments.run.sides import description_of, random_transitions
+from tatl_mj.experiments.run.problems import learning_seed
+from tatl_mj.experiments.run.sides import description_of
+from tatl_mj.experiments.run.source_unit import target_stream
 from tatl_mj.experiments.spec import load_spec
 from tatl_mj.transfer.reward_model import held_out_errors, reward_bases
 
@@ -58,12 +59,11 @@ def reward_errors(name: str, wide: dict) -> dict[str, float]:
     bases = {"plain": plain, "plus-wide": [plain, wide]}
     errors: dict[str, list[float]] = {k: [] for k in bases}
     for seed in SEEDS:
-        size = max(max(preset.target_budgets), preset.alignment_samples)
-        stream = random_transitions(spec.target, size, derive_seed(seed, spec.stream_name, "target-data"))
+        stream = target_stream(spec, preset, seed)
         for budget in preset.target_budgets:
             data = stream.head(budget)
             for key, basis in bases.items():
-                rng = np.random.default_rng(derive_seed(seed, spec.stream_name, "target-learning"))
+                rng = np.random.default_rng(learning_seed(spec, seed))
                 fitted = reward_bases(basis, target.state_dim)
                 held = held_out_errors(data, fitted, "next", target.n_actions, 1e-6, holdout=0.2, rng=rng)
                 if held.reward_rmse is not None:

@@ -234,7 +234,7 @@ class TransferMethod(Protocol):
       exactly ``decide_together``'s (:func:`joint_premises` reads it; default: each
       observed policy's ``premise_step`` on its own).
 
-    ``uses_source``, ``ablation_of``, ``baseline``, ``privileged`` and ``source`` are the
+    ``uses_source``, ``ablation_of``, ``baseline``, ``privileges`` and ``source`` are the
     method's roles: the runner, the verdicts and the reports read them from the built
     method (a role that depends on a setting is a property of the instance).
 

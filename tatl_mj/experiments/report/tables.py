@@ -532,7 +532,6 @@ __all__ = [
     "apprentice_samples",
     "answer_text",
     "credit_table",
-    "credits",
     "paper_table",
     "reproduced",
     "seed_note",

@@ -127,6 +127,11 @@ def _as_indices(policy: Callable, action_values: np.ndarray) -> Callable:
     return indices
 
 
+def learning_seed(spec: ExperimentSpec, seed: int) -> int:
+    """The seed a method's ``learn`` draws from (``TransferProblem.seed``): the same for every method."""
+    return derive_seed(seed, spec.stream_name, "target-learning")
+
+
 def _algorithm2_seed(spec: ExperimentSpec, seed: int) -> int:
     """Seeds the start states of Algorithm 2's rollouts, real and modelled: never the evaluation's."""
     return derive_seed(seed, spec.stream_name, "algorithm2-starts")
@@ -291,7 +296,7 @@ def transfer_problem(
         **source_parts,
         source=source,
         target=target,
-        seed=derive_seed(seed, spec.stream_name, "target-learning"),
+        seed=learning_seed(spec, seed),
         target_return=target_return,
         model_return=model_return,
         model_returns=model_returns,

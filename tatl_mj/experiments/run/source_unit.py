@@ -69,7 +69,7 @@ def _learn_mapping(
     spec: ExperimentSpec,
     preset: Preset,
     seed: int,
-    target_stream: Transitions,
+    stream: Transitions,
 ) -> tuple[Any, dict | None, int, int]:
     """Phase II: the mapping (in each task's mapping coordinates), its record, and the
     source and target samples it used (the target's are the stream's head, reused later);
@@ -80,10 +80,17 @@ def _learn_mapping(
         target=description_of(spec.target),
         n=preset.alignment_samples,
         source_samples=partial(_alignment_source, spec, seed=seed),
-        target_stream=target_stream,
+        target_stream=stream,
         rng=lambda: np.random.default_rng(derive_seed(seed, spec.stream_name, "alignment")),
     )
     return mappings.MAPPINGS[spec.mapping.kind](inputs)
+
+
+def target_stream(spec: ExperimentSpec, preset: Preset, seed: int) -> Transitions:
+    """The seed's shared random-policy stream on the target, as long as the preset needs (its
+    largest budget, or the mapping's samples): every method's first ``n`` come from it."""
+    size = max(max(preset.target_budgets), preset.alignment_samples)
+    return random_transitions(spec.target, size, derive_seed(seed, spec.stream_name, "target-data"))
 
 
 def random_return(spec: ExperimentSpec, preset: Preset, seed: int) -> float:
@@ -111,14 +118,13 @@ def learn_source(
         timings["source_learning_s"] = time.perf_counter() - start
 
         start = time.perf_counter()
-        stream_size = max(max(preset.target_budgets), preset.alignment_samples)
-        target_stream = random_transitions(spec.target, stream_size, derive_seed(seed, spec.stream_name, "target-data"))
+        stream = target_stream(spec, preset, seed)
         timings["target_sampling_s"] = time.perf_counter() - start
     else:
-        source_q, source_samples, target_stream = shared.source_q, shared.source_samples, shared.target_stream
+        source_q, source_samples, stream = shared.source_q, shared.source_samples, shared.target_stream
 
     start = time.perf_counter()
-    mapping, mapping_record, n_map_source, n_map_target = _learn_mapping(spec, preset, seed, target_stream)
+    mapping, mapping_record, n_map_source, n_map_target = _learn_mapping(spec, preset, seed, stream)
     timings["mapping_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -127,7 +133,7 @@ def learn_source(
     return SourceArtifacts(
         source_q=source_q,
         mapping=mapping,
-        target_stream=target_stream,
+        target_stream=stream,
         random_return=random_mean,
         mapping_target_samples=n_map_target,
         mapping_source_samples=n_map_source,
