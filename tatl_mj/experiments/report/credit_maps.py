@@ -76,8 +76,10 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
     import matplotlib.pyplot as plt
 
     params = list(cells[0][0])
-    fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4))
     pairs = sorted({(p.role, p.method, p.other) for _, exp in cells for p in _credit_pairs(exp)})
+    # Room below the panels for (a)'s legend, two entries a pair, two columns (one parameter only).
+    legend_rows = len(pairs) if len(params) == 1 else 0
+    fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4 + 0.16 * legend_rows))
     marked = privileges.privileged(cells[0][1].spec_methods)
 
     def pair_label(key: tuple) -> str:
@@ -123,8 +125,11 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
             ax.set_xticks(x, labels)
             ax.set_xlabel(params[0])
             ax.grid(alpha=0.25)
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(fontsize=7, frameon=False)
+        # (a)'s pairs below its panel, where they cover no interval; (b)'s few methods inside.
+        if ax_p.get_legend_handles_labels()[0]:
+            ax_p.legend(fontsize=7, frameon=False, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
+        if ax_s.get_legend_handles_labels()[0]:
+            ax_s.legend(fontsize=7, frameon=False)
         ax_p.axhline(0.5, color="black", ls="--", lw=0.9)
         ax_p.set_ylim(-0.02, 1.02)
         ax_s.axhline(REFERENCE_THRESHOLD, color="black", ls="--", lw=0.9)
