@@ -66,6 +66,12 @@ def _heat_map(
     fig.colorbar(image, ax=ax)
 
 
+def _pair_label(key: tuple, marked: dict[str, frozenset[str]]) -> str:
+    """``method > other``; a privileged comparator's pair is information (privileges.credits), said here."""
+    held = privileges.no_more_resources(marked, key[1], key[2])
+    return f"{key[1]} > {key[2]}" + ("" if held else " [privileged]")
+
+
 def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path) -> Path:
     """For one sweep: (left) P(method > its ablation or placebo) with its 95% interval over the
     swept parameter (curves; a heat map of the first pair for two parameters); (right) each
@@ -81,12 +87,6 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
     legend_rows = len(pairs) if len(params) == 1 else 0
     fig, (ax_p, ax_s) = plt.subplots(1, 2, figsize=(12, 4.4 + 0.16 * legend_rows))
     marked = privileges.privileged(cells[0][1].spec_methods)
-
-    def pair_label(key: tuple) -> str:
-        # A privileged comparator's pair is information (privileges.credits), said where it is drawn.
-        return f"{key[1]} > {key[2]}" + (
-            "" if privileges.no_more_resources(marked, key[1], key[2]) else " [privileged]"
-        )
 
     methods = sorted({m for _, exp in cells for m, d in exp.methods.items() if d.final_iqm is not None}, key=order)
     colors = method_colors(methods)
@@ -109,7 +109,7 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
                 v, lo, hi = np.array([estimate(exp, key, question) for _, exp in cells]).T
                 ax_p.errorbar(x + 0.1 * (i - len(pairs) / 2) + shift, v, yerr=[v - lo, hi - v], marker=marker,
                               capsize=3, ls=LINE_STYLES[i % len(LINE_STYLES)], color=color,
-                              label=f"{pair_label(key)} ({question})")  # fmt: skip
+                              label=f"{_pair_label(key, marked)} ({question})")  # fmt: skip
         finals = {method: np.array([final(exp, method) for _, exp in cells]).T for method in methods}
         # A baseline's blow-up (scores are unbounded below) must not flatten the others: it is clipped, marked.
         limits = axis_limits([v for f in finals.values() for v in f[0]], keep=(0.0, REFERENCE_THRESHOLD))
@@ -137,7 +137,7 @@ def credit_map(name: str, cells: list[tuple[dict, Experiment]], path: str | Path
         focus_method = pairs[0][1] if pairs else (methods[0] if methods else "")
         _heat_map(fig, ax_p, cells, params, lambda exp: estimate(exp, pairs[0]) if pairs else None, "RdBu", (0, 1))
         _heat_map(fig, ax_s, cells, params, lambda exp: final(exp, focus_method), "viridis", (None, None))
-    pair_text = pair_label(pairs[0]) if pairs and len(params) == 2 else "method > its ablation or placebo"
+    pair_text = _pair_label(pairs[0], marked) if pairs and len(params) == 2 else "method > its ablation or placebo"
     on = "efficiency" if len(params) == 2 else "final (circles), efficiency (squares)"
     ax_p.set_title(f"(a) paired P({pair_text}) on a seed,\n{on}, 95% CI", fontsize=10)
     focus = f" of {pairs[0][1] if pairs else methods[0]}" if methods and len(params) == 2 else ""
