@@ -189,6 +189,48 @@ def test_rounds_roll_the_policy_out_beyond_the_samples():
     assert spread[3][0] > spread[1][0] and spread[3][2] > 2 * seen[0]
 
 
+
+def _recorded_plan(monkeypatch, **settings):
+    """``plan``'s fits in order, each as (kind, iterations, the Q it started from, the Q it gave)."""
+    calls, cold, warm = [], ApprenticeFQISamples.fqi, ApprenticeFQISamples.refit
+
+    def fqi(self, problem, data, rng):
+        calls.append(("cold", self.iterations, None, cold(self, problem, data, rng)))
+        return calls[-1][3]
+
+    def refit(self, data, start, iterations, rng):
+        calls.append(("warm", iterations, start, warm(self, data, start, iterations, rng)))
+        return calls[-1][3]
+
+    monkeypatch.setattr(ApprenticeFQISamples, "fqi", fqi)
+    monkeypatch.setattr(ApprenticeFQISamples, "refit", refit)
+    problem, data = _problem(_linear_target()), _linear_samples(scale=0.2)
+    method = ApprenticeFQISamples(**LINEAR, rounds=3, horizon=30, starts=40, **settings)
+    rewards = fit_reward_model(data, reward_bases({"kind": "linear"}, 2), "next", 3, 1e-6)
+    q, _ = method.plan(problem, data, method.fit_apprentice(problem, data), rewards, np.random.default_rng(0))
+    return q, calls
+
+
+def test_warm_rounds_refit_from_the_previous_q_and_the_policy_gets_every_iteration(monkeypatch):
+    q, calls = _recorded_plan(monkeypatch, round_iterations=5)
+    assert [c[:2] for c in calls] == [("cold", 30), ("warm", 5), ("warm", 5), ("warm", 30)]
+    assert all(calls[i][2] is calls[i - 1][3] for i in range(1, 4)) and q is calls[-1][3]
+    # Without round_iterations every fit starts from zero with every iteration, as before.
+    q, calls = _recorded_plan(monkeypatch, round_iterations=None)
+    assert [c[:2] for c in calls] == [("cold", 30)] * 4 and q is calls[-1][3]
+
+
+def test_a_warm_refit_starts_where_it_is_told():
+    # From Q_0 = the converged Q of the same data one more iteration stays there; from zero one
+    # iteration is a one-step Q, far from it: the start is used, not reset.
+    problem, data = _problem(_linear_target()), _linear_samples()
+    method = ApprenticeFQISamples(**{**LINEAR, "iterations": 400})
+    converged = method.fqi(problem, data, np.random.default_rng(0))
+    again = method.refit(data, converged, 1, np.random.default_rng(0))
+    np.testing.assert_allclose(again.weights, converged.weights, rtol=1e-9, atol=1e-12)
+    cold_one = dataclasses.replace(method, iterations=1).fqi(problem, data, np.random.default_rng(0))
+    assert np.abs(cold_one.weights - converged.weights).max() > 0.5
+
 def test_roles_and_pairs():
     held = contract(registry.build("apprentice-fqi-samples"))
     assert not held.uses_source and not held.privileged and not held.baseline and held.ablation_of == ("ta-tl",)
@@ -216,6 +258,8 @@ def test_settings_it_cannot_take_are_refused_in_one_line():
         ApprenticeFQISamples(
             reward_features={"kind": "rbf", "centers": 4, "low": [0], "high": [1], "sigma": [1]}
         ).check(target, target)
+    with pytest.raises(InvalidSetting, match="ApprenticeFQISamples.round_iterations"):
+        ApprenticeFQISamples(round_iterations=0)
     with pytest.raises(InvalidSetting, match="model_samples .2. must cover one state's 3 actions"):
         ApprenticeFQISamples(model_samples=2).check(target, target)
     wide = {"kind": "rbf", "centers": [[0.0, 0.0]], "sigma": [1.0, 1.0], "periodic": [False, False]}

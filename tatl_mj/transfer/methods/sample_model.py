@@ -13,6 +13,9 @@ for every action, from
   sample states, add what it visits, refit FQI": a random-policy stream never leaves
   the bottom of a pendulum, so one-step transitions from its states alone could never
   teach balancing; the rounds let the model explore, as TA-TL's source lets it.
+  With ``round_iterations`` each refit starts from the previous round's Q (warm):
+  the fits that only steer the next rollouts take that many iterations, the last
+  one, which becomes the policy, all of ``iterations``.
 
 It never calls the target task's reward function, resets the target or draws from its
 reset box, steps its simulator, or asks any other hook of the problem for transitions:
@@ -34,7 +37,7 @@ import numpy as np
 from tatl_mj.description import CellMap, TaskDescription
 from tatl_mj.transfer.apprentice import Apprentice
 from tatl_mj.transfer.features import FeaturesSpec, check_features
-from tatl_mj.transfer.fqi import QFunction
+from tatl_mj.transfer.fqi import QFunction, fitted_q_iteration, make_regressor
 from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.methods.target_fqi import GreedyPolicy, TargetFQI
 from tatl_mj.transfer.methods.tatl import TATL
@@ -93,6 +96,12 @@ class ApprenticeFQISamples(TargetFQI):
         holds or the apprentice leaves the samples' range, see :data:`TRUST`).
       starts: how many sample states each round's rollouts start from, drawn anew each
         round, or ``"all"``.
+      round_iterations: None, every fit from Q_0 = 0 with ``iterations``; or the FQI
+        iterations of the rounds' intermediate refits, each started from the previous
+        round's Q, the last refit (the policy's) then also started there but with every
+        one of ``iterations``. An intermediate fit only steers the next rollouts, and a
+        warm start carries the iterations already done, so fewer suffice (the fits are
+        most of the method's cost).
       reward_features: the reward and end model's basis: a features spec, or a list of
         them side by side (None: the FQI learner's features).
       reward_inputs: ``"next"``, a reward of the state reached, or ``"transition"``, of
@@ -109,6 +118,7 @@ class ApprenticeFQISamples(TargetFQI):
     rounds: int = 4
     horizon: int = 100
     starts: int | str = 100
+    round_iterations: int | None = None
     reward_features: dict | tuple[dict, ...] | None = None
     reward_inputs: str = "next"
     reward_ridge: float = 1e-6
@@ -126,6 +136,7 @@ class ApprenticeFQISamples(TargetFQI):
         "rounds": [Interval(int, 0)],
         "horizon": [Interval(int, 1)],
         "starts": [Options("all"), Interval(int, 1)],
+        "round_iterations": [None, Interval(int, 1)],
         "reward_features": [None, FeaturesSpec(), ListOf(FeaturesSpec(), nonempty=True)],
         "reward_inputs": [Options(*REWARD_INPUTS)],
         "reward_ridge": [Interval(float, 0)],
@@ -187,11 +198,21 @@ class ApprenticeFQISamples(TargetFQI):
         states = np.unique(np.vstack([data.states, data.next_states]), axis=0)
         q = self.fqi(problem, Transitions.concatenate([data, self.model_transitions(model, states, rng)]), rng)
         inside = _trust_region(data, target.periodic)
-        for _ in range(self.rounds):
+        for round_ in range(self.rounds):
             visited = model.rollouts(q, self._starts(data, rng), self.horizon, self.epsilon, inside, rng)
             states = np.vstack([states, visited])
-            q = self.fqi(problem, Transitions.concatenate([data, self.model_transitions(model, states, rng)]), rng)
+            both = Transitions.concatenate([data, self.model_transitions(model, states, rng)])
+            if self.round_iterations is None:
+                q = self.fqi(problem, both, rng)
+            else:
+                last = round_ == self.rounds - 1
+                q = self.refit(both, q, self.iterations if last else self.round_iterations, rng)
         return q, states
+
+    def refit(self, data: Transitions, start: QFunction, iterations: int, rng: np.random.Generator) -> QFunction:
+        """FQI on ``data`` from Q_0 = ``start`` (a warm start), ``iterations`` of them."""
+        regressor = make_regressor(self.regressor_spec(), data.state_dim)
+        return fitted_q_iteration(data, start.n_actions, regressor, self.gamma, iterations, initial_q=start, rng=rng)
 
     def _starts(self, data: Transitions, rng: np.random.Generator) -> np.ndarray:
         if self.starts == "all" or int(self.starts) >= len(data):
