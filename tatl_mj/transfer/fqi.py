@@ -79,11 +79,19 @@ class LinearRegressor:
     the ``1 / (1 - gamma)`` iterations its values look ahead. With a ridge near 0, a fit with fewer samples than
     features amplifies that rounding at the next states, which lie off the fitted
     samples, and a greedy policy can change.
+
+    ``next_pass`` values the next states each iteration by ``"matrix"``, one product
+    over every sample (BLAS's gemm, which copies all the features into its packed
+    layout each call: the larger cost with few actions), or ``"blocked"``, a
+    matrix-vector product per action on blocks of samples that stay in cache: the
+    same sums in another order (equal up to rounding), about 2x as fast in single
+    precision on 256 features, 1.4x in double on 100.
     """
 
     features: Features
     ridge: float = 1e-6
     precision: str = "double"
+    next_pass: str = "matrix"
 
     def __post_init__(self) -> None:
         if not isinstance(self.features, Features):
@@ -91,6 +99,7 @@ class LinearRegressor:
         if not (math.isfinite(self.ridge) and self.ridge >= 0):
             raise ValueError(f"LinearRegressor.ridge must be a finite number >= 0, got {self.ridge!r}")
         choice("LinearRegressor", "precision", self.precision, PRECISIONS)
+        choice("LinearRegressor", "next_pass", self.next_pass, NEXT_PASSES)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,13 +123,15 @@ class ExtraTrees:
 Regressor = LinearRegressor | ExtraTrees
 REGRESSOR_KINDS = ("linear", "extra_trees")
 PRECISIONS = ("double", "single")
+NEXT_PASSES = ("matrix", "blocked")
 _DTYPES = {"double": np.float64, "single": np.float32}
 
 
 def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
     """Builds a regressor from a plain dict.
 
-    - ``{"kind": "linear", "features": {<features spec>}, "ridge": 1e-6, "precision": "double"}``
+    - ``{"kind": "linear", "features": {<features spec>}, "ridge": 1e-6, "precision": "double",
+      "next_pass": "matrix"}``
       (see :func:`tatl_mj.transfer.features.make_features`);
     - ``{"kind": "extra_trees", "n_estimators": 50, "min_samples_split": 5,
       "min_samples_leaf": 2, "seed": 0}``.
@@ -133,7 +144,7 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
         raise ValueError(f"regressor spec must be a dict, got {type(spec).__name__}")
     kind = spec.get("kind")
     valid = {
-        "linear": {"kind", "features", "ridge", "precision", "seed"},
+        "linear": {"kind", "features", "ridge", "precision", "next_pass", "seed"},
         "extra_trees": {"kind", "n_estimators", "min_samples_split", "min_samples_leaf", "seed", "features"},
     }
     if kind not in valid:
@@ -145,7 +156,9 @@ def make_regressor(spec: dict[str, Any], state_dim: int) -> Regressor:
         if "features" not in spec:
             raise ValueError("linear regressor spec lacks 'features'")
         features = make_features(spec["features"], state_dim)
-        return LinearRegressor(features, float(spec.get("ridge", 1e-6)), spec.get("precision", "double"))
+        return LinearRegressor(
+            features, float(spec.get("ridge", 1e-6)), spec.get("precision", "double"), spec.get("next_pass", "matrix")
+        )
     kwargs = {k: v for k, v in spec.items() if k not in ("kind", "features")}
     return ExtraTrees(**kwargs)
 
@@ -359,17 +372,23 @@ def _fqi_linear(
             weights = _iterate_on_samples(
                 t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, prior_next,
                 _DTYPES[reg.precision], prior_taken=prior_taken, prior_next=prior_next,
+                blocked=reg.next_pass == "blocked",
             )  # fmt: skip
         return ResidualQ(prior, LinearQ(reg.features, weights))
     next_values = q0.values(nexts)
-    iterate = _iterate_on_samples if on_samples else _iterate_on_model
     # An iteration is a few memory-bound matrix-vector products: BLAS threads only add
     # synchronisation.
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
-        weights = iterate(
-            t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
-            _DTYPES[reg.precision],
-        )  # fmt: skip
+        if on_samples:
+            weights = _iterate_on_samples(
+                t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
+                _DTYPES[reg.precision], blocked=reg.next_pass == "blocked",
+            )  # fmt: skip
+        else:
+            weights = _iterate_on_model(
+                t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
+                _DTYPES[reg.precision],
+            )  # fmt: skip
     return LinearQ(reg.features, weights)
 
 
@@ -387,11 +406,13 @@ def _iterate_on_samples(
     dtype,
     prior_taken=None,
     prior_next=None,
+    blocked=False,
 ) -> np.ndarray:
     """FQI sample by sample: per iteration one pass over the next-state features (on a
     one-hot basis, a pick of weight columns: :class:`_NextCells`) and one over the state
     features (both stored action-block-contiguous, transposed, so each product is one
-    BLAS call with a long inner dimension), in ``dtype``. With
+    BLAS call with a long inner dimension), in ``dtype``; ``blocked``: the next states'
+    pass a block of samples at a time (``LinearRegressor.next_pass``). With
     ``prior_taken`` (N,) and ``prior_next`` (V, A) the weights fit the residual from that prior."""
     order = np.argsort(t.actions, kind="stable")
     bounds = np.searchsorted(t.actions[order], np.arange(n_actions + 1))
@@ -404,9 +425,7 @@ def _iterate_on_samples(
             return weights[:, cells]
     else:
         phi_next_t = _gathered_columns(phi_next, next_of[order], dtype)  # (k, N)
-
-        def next_pass(weights: np.ndarray) -> np.ndarray:
-            return weights @ phi_next_t
+        next_pass = _blocked_pass(phi_next_t) if blocked else lambda weights: weights @ phi_next_t
 
     rewards = t.rewards[order]
     if prior_taken is not None:
@@ -423,6 +442,25 @@ def _iterate_on_samples(
             weights[a] = solve(a, (phi_t[:, block] @ y[block]).astype(np.float64, copy=False))
         best_next = (next_pass(weights.astype(dtype, copy=False)) + offset_t).max(axis=0).astype(np.float64, copy=False)
     return weights
+
+
+def _blocked_pass(phi_t: np.ndarray, cache_bytes: int = 1 << 19) -> Callable[[np.ndarray], np.ndarray]:
+    """``weights @ phi_t`` (A, N) as one matrix-vector product per action on each block of
+    columns, the block (``cache_bytes`` of features) read from memory once and from cache
+    by the other actions' products."""
+    k, n = phi_t.shape
+    width = max(64, cache_bytes // (k * phi_t.itemsize))
+    blocks = [slice(start, min(start + width, n)) for start in range(0, n, width)]
+
+    def next_pass(weights: np.ndarray) -> np.ndarray:
+        out = np.empty((len(weights), n), dtype=np.result_type(weights, phi_t))
+        for block in blocks:
+            features = phi_t[:, block]
+            for a, row in enumerate(weights):
+                np.matmul(row, features, out=out[a, block])
+        return out
+
+    return next_pass
 
 
 @dataclasses.dataclass(frozen=True)
@@ -538,6 +576,7 @@ __all__ = [
     "ExtraTrees",
     "LinearQ",
     "LinearRegressor",
+    "NEXT_PASSES",
     "PRECISIONS",
     "QFunction",
     "REGRESSOR_KINDS",

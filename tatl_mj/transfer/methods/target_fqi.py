@@ -20,7 +20,15 @@ import numpy as np
 
 from tatl_mj.description import TaskDescription
 from tatl_mj.transfer.features import FeaturesSpec, check_features
-from tatl_mj.transfer.fqi import PRECISIONS, REGRESSOR_KINDS, QFunction, fitted_q_iteration, greedy_each, make_regressor
+from tatl_mj.transfer.fqi import (
+    NEXT_PASSES,
+    PRECISIONS,
+    REGRESSOR_KINDS,
+    QFunction,
+    fitted_q_iteration,
+    greedy_each,
+    make_regressor,
+)
 from tatl_mj.transfer.intertask_mapping import Mapping
 from tatl_mj.transfer.method import Policy, TransferProblem
 from tatl_mj.transfer.placebo import SOURCES
@@ -79,6 +87,9 @@ class TargetFQI:
       ridge: the linear regressor's ridge (default 1e-6); refused for extra-trees.
       precision: the linear regressor's ``"double"`` (default) or ``"single"``
         passes (see :class:`~tatl_mj.transfer.fqi.LinearRegressor`); refused for extra-trees.
+      next_pass: the linear regressor's ``"matrix"`` (default) or ``"blocked"`` pass over
+        the next states (the same FQI up to rounding; see
+        :class:`~tatl_mj.transfer.fqi.LinearRegressor`); refused for extra-trees.
       n_estimators: extra-trees' tree count (default 50); refused for linear.
       gamma, iterations: FQI's discount and iteration count.
       data: where its n target transitions come from (n: the budget):
@@ -98,6 +109,7 @@ class TargetFQI:
     regressor: str = "linear"
     ridge: float | None = None
     precision: str | None = None
+    next_pass: str | None = None
     n_estimators: int | None = None
     gamma: float = 0.95
     iterations: int = 20
@@ -113,6 +125,7 @@ class TargetFQI:
         "regressor": [Options(*REGRESSOR_KINDS)],
         "ridge": [None, Interval(float, 0)],
         "precision": [None, Options(*PRECISIONS)],
+        "next_pass": [None, Options(*NEXT_PASSES)],
         "n_estimators": [None, Interval(int, 1)],
         "gamma": [Interval(float, 0, 1, closed="left")],
         "iterations": [Interval(int, 1)],
@@ -128,6 +141,7 @@ class TargetFQI:
         for field, regressor in (
             ("ridge", "linear"),
             ("precision", "linear"),
+            ("next_pass", "linear"),
             ("features", "linear"),
             ("n_estimators", "extra_trees"),
         ):
@@ -164,8 +178,9 @@ class TargetFQI:
         spec: dict = {"kind": self.regressor, "features": self.linear_features}
         if self.regressor == "linear":
             spec["ridge"] = 1e-6 if self.ridge is None else self.ridge
-            if self.precision is not None:
-                spec["precision"] = self.precision
+            for key in ("precision", "next_pass"):
+                if getattr(self, key) is not None:
+                    spec[key] = getattr(self, key)
         elif self.n_estimators is not None:
             spec["n_estimators"] = self.n_estimators
         return spec
