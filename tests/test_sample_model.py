@@ -189,7 +189,6 @@ def test_rounds_roll_the_policy_out_beyond_the_samples():
     assert spread[3][0] > spread[1][0] and spread[3][2] > 2 * seen[0]
 
 
-
 def _recorded_plan(monkeypatch, **settings):
     """``plan``'s fits in order, each as (kind, iterations, the Q it started from, the Q it gave)."""
     calls, cold, warm = [], ApprenticeFQISamples.fqi, ApprenticeFQISamples.refit
@@ -230,6 +229,7 @@ def test_a_warm_refit_starts_where_it_is_told():
     np.testing.assert_allclose(again.weights, converged.weights, rtol=1e-9, atol=1e-12)
     cold_one = dataclasses.replace(method, iterations=1).fqi(problem, data, np.random.default_rng(0))
     assert np.abs(cold_one.weights - converged.weights).max() > 0.5
+
 
 def test_roles_and_pairs():
     held = contract(registry.build("apprentice-fqi-samples"))
