@@ -28,6 +28,7 @@ spends in :func:`fitted_q_iteration` are metered by ``tatl_mj.transfer.fit_time`
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Callable, Protocol, runtime_checkable
 
@@ -378,17 +379,13 @@ def _fqi_linear(
     next_values = q0.values(nexts)
     # An iteration is a few memory-bound matrix-vector products: BLAS threads only add
     # synchronisation.
+    blocked = reg.next_pass == "blocked"
+    iterate = functools.partial(_iterate_on_samples, blocked=blocked) if on_samples else _iterate_on_model
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
-        if on_samples:
-            weights = _iterate_on_samples(
-                t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
-                _DTYPES[reg.precision], blocked=reg.next_pass == "blocked",
-            )  # fmt: skip
-        else:
-            weights = _iterate_on_model(
-                t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
-                _DTYPES[reg.precision],
-            )  # fmt: skip
+        weights = iterate(
+            t, n_actions, gamma, iterations, factors, phi_states, state_of, phi_next, next_of, next_values,
+            _DTYPES[reg.precision],
+        )  # fmt: skip
     return LinearQ(reg.features, weights)
 
 
